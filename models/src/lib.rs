@@ -1,0 +1,4 @@
+//! supine-models: the host-only toolchain that produces everything `supine-core` reads.
+//!
+//! MakeHuman assets → statistical body model → posed, rendered synthetic Kinect data → trained and quantised models
+//! → evaluation reports. Runs on a workstation (rayon for parallel work); never on the head computer.
