@@ -8,9 +8,15 @@
 //! - [`crc`]: the checksums shared by the wire protocol and the model files.
 //! - [`camera`]: pinhole intrinsics of the Kinect v1 depth camera and the named coordinate frames.
 //! - [`depth`]: a borrowed 640x480 millimetre depth frame, as every depth source lends it.
+//! - [`wire`]: the protocol to the arm controller (serial COBS/postcard/CRC-32C, CAN with E2E, SLCAN, candump).
+//! - [`model_file`]: the versioned, checksummed container every model file uses (validated once, borrowed views).
+//! - [`body_model`]: the statistical body model (mean + shape basis, joints, salient points, torso ICP subset).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::std_instead_of_core))]
 
+pub mod body_model;
 pub mod camera;
 pub mod crc;
 pub mod depth;
+pub mod wire;
+pub mod model_file;

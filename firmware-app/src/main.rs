@@ -3,11 +3,15 @@
 //! Commands follow the contract in the README (`supine --help`): exit 0 on success, 1 on a runtime failure,
 //! 2 on bad usage; errors name the bad argument or file.
 
+mod demo;
 mod failure;
+mod info;
+mod links;
+mod notify;
+mod record;
 mod wire;
 
 use clap::{Parser, Subcommand};
-use failure::Failure;
 
 /// supine: upper-body tracking of a patient on a bed from a Kinect v1, with pose and probe packets to the arm controller.
 #[derive(Parser)]
@@ -23,6 +27,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// The main job on the committed synthetic recording: the whole pipeline as far as it is built, then a table.
+    Demo(demo::DemoArgs),
+    /// Record a depth stream to an .oni file (plays in libOpenNI2 and `supine replay`).
+    Record(record::RecordArgs),
+    /// Show the models, depth devices and links this build and machine offer.
+    Info(info::InfoArgs),
     /// Wire protocol tools: print samples, decode captures, bring up a link to the arm controller.
     #[command(subcommand)]
     Wire(wire::WireCommand),
@@ -45,6 +55,9 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     init_tracing(cli.verbose);
     let result = match cli.command {
+        Command::Demo(args) => demo::run(args),
+        Command::Record(args) => record::run(args),
+        Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),
     };
     match result {

@@ -2,3 +2,11 @@
 //!
 //! MakeHuman assets → statistical body model → posed, rendered synthetic Kinect data → trained and quantised models
 //! → evaluation reports. Runs on a workstation (rayon for parallel work); never on the head computer.
+
+pub mod assets;
+pub mod body;
+pub mod dataset;
+pub mod pose;
+pub mod render;
+pub mod scene;
+pub mod sequence;

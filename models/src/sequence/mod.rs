@@ -1,0 +1,428 @@
+//! 30 Hz tracking sequences: one patient on the bed, seen by a static robot head, breathing (chest and belly rise
+//! `breathing_amplitude_m` at `breathing_hz`), moving slowly (torso drift and roll, arms blending between two bed
+//! sub-poses) and, with the occluder, the robot arm sweeping the probe over the torso (hips → shoulders and back),
+//! hiding up to about half of it.
+//!
+//! Output in `DIR`: `sequence.oni` (OpenNI2 recording through `supine_drivers::oni::OniWriter`, 16zT like OpenNI's
+//! Recorder), `truth.jsonl` (one [`FrameTruth`] per frame) and `sequence.json` ([`SequenceMeta`]).
+//!
+//! Cost per frame: one LBS (body source), one render, a second draw of the arm to measure occlusion, full-frame
+//! noise, one 16zT encode: ~20–40 ms on one core. Frames are produced in order and streamed to disk.
+
+pub mod cli;
+
+use crate::dataset::{contact_at, mix_seed, project_salient};
+use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
+use crate::render::{Label, Renderer};
+use crate::scene::arm::ArmState;
+use crate::scene::body::{BodySource, PosedBody};
+use crate::scene::shapes::vertex_normals;
+use crate::scene::{BedParams, Plane, Scene, ViewParams, matrix_rows};
+use anyhow::{Context, Result, ensure};
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_chacha::rand_core::SeedableRng;
+use std::io::Write;
+use std::path::Path;
+use supine_core::camera::Intrinsics;
+use supine_drivers::oni::{Codec, OniWriter};
+
+/// Parameters of a sequence.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SequenceConfig {
+    /// Number of frames.
+    pub frames: u32,
+    /// Seed.
+    pub seed: u64,
+    /// Frame rate, Hz.
+    pub fps: f32,
+    /// Whether the robot arm sweeps over the torso.
+    pub occluder: bool,
+    /// Peak rise of the chest/belly front, metres.
+    pub breathing_amplitude_m: f32,
+    /// Breathing rate, Hz.
+    pub breathing_hz: f32,
+    /// Seconds for one probe sweep hips → shoulders → hips.
+    pub sweep_period_s: f32,
+    /// Noise model.
+    pub noise: KinectNoise,
+}
+
+impl SequenceConfig {
+    /// Defaults: 30 Hz, 7 mm at 0.25 Hz breathing, a 10 s sweep, the default noise.
+    pub fn new(frames: u32, seed: u64, occluder: bool) -> Self {
+        SequenceConfig {
+            frames,
+            seed,
+            fps: 30.0,
+            occluder,
+            breathing_amplitude_m: 0.007,
+            breathing_hz: 0.25,
+            sweep_period_s: 10.0,
+            noise: KinectNoise::default(),
+        }
+    }
+}
+
+/// `DIR/sequence.json`: what is constant over the sequence.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct SequenceMeta {
+    /// Generation parameters.
+    pub config: SequenceConfig,
+    /// Body source name.
+    pub body_source: String,
+    /// Shape coefficients of the patient.
+    pub shape: Vec<f32>,
+    /// Camera intrinsics (fx, fy, cx, cy, width, height).
+    pub intrinsics: [f32; 6],
+    /// Camera extrinsics (static head), 4x4 row-major.
+    pub camera_from_world: [[f32; 4]; 4],
+    /// Head pose parameters.
+    pub view: ViewParams,
+    /// Bed geometry.
+    pub bed: BedParams,
+    /// Floor, mattress and head-section planes in the camera frame.
+    pub planes_camera: [Plane; 3],
+}
+
+/// Ground truth of one frame (`truth.jsonl`).
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct FrameTruth {
+    /// Frame index from 0 (the .oni frame id is this + 1).
+    pub frame: u32,
+    /// Capture time, µs from the first frame (the .oni timestamp).
+    pub time_us: u64,
+    /// Salient points in the camera frame.
+    pub salient_camera: [[f32; 3]; 6],
+    /// Salient points in the world (`robot_base`) frame.
+    pub salient_world: [[f32; 3]; 6],
+    /// Salient points in pixels; (−1, −1) if behind the camera.
+    pub salient_pixels: [[f32; 2]; 6],
+    /// Torso pose (origin at the hip centre, y toward the shoulders' centre, x the patient's left, z out of the
+    /// chest) in the camera frame, 4x4 row-major.
+    pub camera_from_torso: [[f32; 4]; 4],
+    /// Probe tip pose in the camera frame, when the arm is present.
+    pub camera_from_probe: Option<[[f32; 4]; 4]>,
+    /// Probe tip pose in the world frame, when the arm is present.
+    pub world_from_probe: Option<[[f32; 4]; 4]>,
+    /// Fraction of visible torso pixels (chest, abdomen, pelvis) hidden by the arm.
+    pub torso_occluded_fraction: f32,
+    /// Fraction of all visible body pixels hidden by the arm.
+    pub body_occluded_fraction: f32,
+    /// Current breathing rise of the chest front, mm.
+    pub breathing_mm: f32,
+    /// Arm-motion blend parameter (0..1) of the body pose.
+    pub arm_blend: f32,
+}
+
+/// Summary of a generated sequence.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct SequenceSummary {
+    /// Frames written.
+    pub frames: u32,
+    /// Mean torso occluded fraction over frames.
+    pub torso_occluded_mean: f32,
+    /// Largest torso occluded fraction.
+    pub torso_occluded_max: f32,
+    /// Frames per second of generation.
+    pub frames_per_second: f32,
+}
+
+/// Torso frame from the salient points: origin at the hip centre, y toward the shoulder centre, x the patient's left.
+pub fn torso_pose(salient: &[[f32; 3]; 6]) -> Isometry3<f32> {
+    let s = salient.map(Vector3::from);
+    let hip = (s[4] + s[5]) * 0.5;
+    let shoulder = (s[1] + s[2]) * 0.5;
+    let y = (shoulder - hip).normalize();
+    let left = (s[1] - s[2]) + (s[4] - s[5]);
+    let x = (left - y * left.dot(&y)).normalize();
+    let z = x.cross(&y);
+    let rot =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
+            x, y, z,
+        ])));
+    Isometry3::from_parts(Translation3::from(hip), rot)
+}
+
+/// Lift the front of the chest and belly by `rise` metres along the skin normal (back and limbs stay), weighted by a
+/// smooth window between hips and shoulders and by how much the skin faces out of the chest. The belly point moves
+/// with the skin under it.
+pub fn breathe(body: &mut PosedBody, torso_parts: &[u8], rise: f32) {
+    if rise == 0.0 {
+        return;
+    }
+    let t = torso_pose(&body.salient);
+    let up = t.rotation * Vector3::z();
+    let axis = t.rotation * Vector3::y();
+    let len = ((Vector3::from(body.salient[1]) + Vector3::from(body.salient[2])) * 0.5
+        - t.translation.vector)
+        .norm();
+    let normals = vertex_normals(&body.vertices, &body.triangles);
+    let weight = |p: Vector3<f32>, n: Vector3<f32>| {
+        let s = (p - t.translation.vector).dot(&axis) / len; // 0 at the hips, 1 at the shoulders
+        let window = if (0.0..=1.05).contains(&s) {
+            (std::f32::consts::PI * (s / 1.05)).sin()
+        } else {
+            0.0
+        };
+        window * n.dot(&up).max(0.0)
+    };
+    for (i, v) in body.vertices.iter_mut().enumerate() {
+        if torso_parts.contains(&body.vertex_part[i]) {
+            let n = Vector3::from(normals[i]);
+            let p = Vector3::from(*v);
+            *v = (p + n * (rise * weight(p, n))).into();
+        }
+    }
+    let belly = Vector3::from(body.salient[3]);
+    body.salient[3] = (belly + up * (rise * weight(belly, up))).into();
+}
+
+/// Generate a sequence into `dir`; `on_frame` is called after each frame.
+pub fn generate(
+    source: &dyn BodySource,
+    cfg: &SequenceConfig,
+    dir: &Path,
+    on_frame: &dyn Fn(),
+) -> Result<SequenceSummary> {
+    ensure!(cfg.frames > 0, "need at least one frame");
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let started = std::time::Instant::now();
+    let k = Intrinsics::KINECT_V1;
+    let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, 0x5E0));
+    let (shape_seed, pose_a, pose_b) = (rng.r#gen::<u64>(), rng.r#gen::<u64>(), rng.r#gen::<u64>());
+    let first = source.sample_motion(shape_seed, pose_a, pose_b, 0.0)?;
+    let torso_parts: Vec<u8> = first
+        .part_names
+        .iter()
+        .enumerate()
+        .filter(|(_, n)| matches!(n.as_str(), "chest" | "abdomen" | "belly" | "pelvis"))
+        .map(|(i, _)| i as u8)
+        .collect();
+    let bed = BedParams::sample(&mut rng, first.head_raise_rad, first.hinge_y_m);
+    let scene0 = Scene::new(&first, bed);
+    let view = ViewParams::sample_nominal(&mut rng, scene0.torso_centre()).sample_view(&mut rng);
+    let cfw = view.camera_from_world(scene0.midline_y(), bed.mattress_top);
+    let arm_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
+    let tau = std::f32::consts::TAU;
+    let drift_phase: [f32; 3] = [
+        rng.gen_range(0.0..tau),
+        rng.gen_range(0.0..tau),
+        rng.gen_range(0.0..tau),
+    ];
+    let meta = SequenceMeta {
+        config: cfg.clone(),
+        body_source: source.name(),
+        shape: first.shape.clone(),
+        intrinsics: [k.fx, k.fy, k.cx, k.cy, k.width as f32, k.height as f32],
+        camera_from_world: matrix_rows(&cfw),
+        view,
+        bed,
+        planes_camera: scene0.planes_world().map(|p| p.transformed(&cfw)),
+    };
+    std::fs::write(dir.join("sequence.json"), serde_json::to_vec_pretty(&meta)?)?;
+    let oni_path = dir.join("sequence.oni");
+    let mut oni = OniWriter::create(&oni_path, &k, Codec::Z16Table)
+        .with_context(|| format!("creating {}", oni_path.display()))?;
+    let truth_path = dir.join("truth.jsonl");
+    let mut truth = std::io::BufWriter::new(
+        std::fs::File::create(&truth_path).with_context(|| format!("creating {}", truth_path.display()))?,
+    );
+    let mut renderer = Renderer::new(k);
+    let mut scratch = NoiseScratch::default();
+    let mut depth = vec![0u16; k.width as usize * k.height as usize];
+    let (mut occ_sum, mut occ_max) = (0.0f32, 0.0f32);
+    for f in 0..cfg.frames {
+        let time = f as f32 / cfg.fps;
+        let time_us = (f as f64 * 1e6 / cfg.fps as f64).round() as u64;
+        // Arms blend slowly (30 s period) between two sub-poses; the torso drifts a few cm and rolls a degree or two.
+        let arm_blend = 0.5 - 0.5 * (tau * time / 30.0).cos();
+        let mut body = source.sample_motion(shape_seed, pose_a, pose_b, arm_blend)?;
+        let breath = 0.5 - 0.5 * (tau * cfg.breathing_hz * time).cos();
+        breathe(&mut body, &torso_parts, cfg.breathing_amplitude_m * breath);
+        let drift = Isometry3::from_parts(
+            Translation3::new(
+                0.015 * (tau * time / 23.0 + drift_phase[0]).sin(),
+                0.02 * (tau * time / 31.0 + drift_phase[1]).sin(),
+                0.0,
+            ),
+            UnitQuaternion::from_axis_angle(
+                &Vector3::y_axis(),
+                0.03 * (tau * time / 19.0 + drift_phase[2]).sin(),
+            ),
+        );
+        for v in body.vertices.iter_mut().chain(body.salient.iter_mut()) {
+            let p = drift * Point3::from(*v);
+            *v = [p.x, p.y, p.z];
+        }
+        let mut scene = Scene::new(&body, bed);
+        let is_torso = |p: u8| torso_parts.contains(&p);
+        scene.render(&mut renderer, &cfw, false);
+        let count = |r: &Renderer| {
+            let b = r.buffers();
+            let mut torso = 0usize;
+            let mut all = 0usize;
+            for (l, p) in b.label.iter().zip(&b.part) {
+                if *l == Label::Body as u8 {
+                    all += 1;
+                    torso += is_torso(*p) as usize;
+                }
+            }
+            (torso, all)
+        };
+        let (torso0, all0) = count(&renderer);
+        let (mut torso_occ, mut body_occ) = (0.0, 0.0);
+        let mut probe = None;
+        if cfg.occluder {
+            // Sweep along the midline (v: hips 0.9 → shoulders 0.15 and back) with a slow sideways wobble.
+            let phase = (time / cfg.sweep_period_s).fract();
+            let v = 0.9 - 0.75 * (1.0 - (2.0 * phase - 1.0).abs());
+            let u = 0.5 + 0.15 * (tau * time / 7.0).sin();
+            let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
+            let (contact, normal) = contact_at(&scene, &normals, u, v);
+            let eye = cfw.inverse().translation.vector;
+            let hint = crate::dataset::elbow_hint(arm_shoulder, contact, eye);
+            let arm = ArmState::reach(arm_shoulder, contact, -normal, hint);
+            renderer.draw(&crate::scene::arm_draw(&arm.mesh), &cfw);
+            let (torso1, all1) = count(&renderer);
+            torso_occ = if torso0 > 0 {
+                1.0 - torso1 as f32 / torso0 as f32
+            } else {
+                0.0
+            };
+            body_occ = if all0 > 0 {
+                1.0 - all1 as f32 / all0 as f32
+            } else {
+                0.0
+            };
+            probe = Some(arm.world_from_probe);
+            scene.arm = Some(arm);
+        }
+        occ_sum += torso_occ;
+        occ_max = occ_max.max(torso_occ);
+        let noise_seed = mix_seed(mix_seed(cfg.seed, 0x5E0), f as u64 + 1);
+        cfg.noise.apply(
+            renderer.buffers(),
+            &k,
+            Rect::full(k.width as usize, k.height as usize),
+            noise_seed,
+            &mut scratch,
+            &mut depth,
+        );
+        oni.write_frame(&depth, time_us)
+            .with_context(|| format!("writing frame {f} to {}", oni_path.display()))?;
+        let (salient_camera, salient_pixels) = project_salient(&scene, &cfw, &k);
+        let ft = FrameTruth {
+            frame: f,
+            time_us,
+            salient_camera,
+            salient_world: scene.salient_world,
+            salient_pixels,
+            camera_from_torso: matrix_rows(&(cfw * torso_pose(&scene.salient_world))),
+            camera_from_probe: probe.map(|p| matrix_rows(&(cfw * p))),
+            world_from_probe: probe.map(|p| matrix_rows(&p)),
+            torso_occluded_fraction: torso_occ,
+            body_occluded_fraction: body_occ,
+            breathing_mm: cfg.breathing_amplitude_m * breath * 1000.0,
+            arm_blend,
+        };
+        serde_json::to_writer(&mut truth, &ft)?;
+        truth.write_all(b"\n")?;
+        if f == 0 || (cfg.occluder && (f == cfg.frames / 2)) {
+            let mut rgb = crate::dataset::preview::colour_depth(&depth, Some(&renderer.buffers().label));
+            crate::dataset::preview::draw_truth(
+                &mut rgb,
+                k.width as usize,
+                k.height as usize,
+                &salient_pixels,
+                ft.camera_from_probe,
+            );
+            crate::dataset::preview::write_rgb_png(
+                &dir.join(format!("preview_{f:05}.png")),
+                &rgb,
+                k.width as usize,
+                k.height as usize,
+            )?;
+        }
+        on_frame();
+    }
+    truth.flush()?;
+    oni.finish()
+        .with_context(|| format!("finishing {}", oni_path.display()))?;
+    let secs = started.elapsed().as_secs_f32();
+    Ok(SequenceSummary {
+        frames: cfg.frames,
+        torso_occluded_mean: occ_sum / cfg.frames as f32,
+        torso_occluded_max: occ_max,
+        frames_per_second: cfg.frames as f32 / secs.max(1e-6),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::scene::body::{MANNEQUIN_PARTS, Mannequin};
+
+    #[test]
+    fn breathing_lifts_the_chest_front_only() {
+        let mut body = Mannequin::build(&Mannequin::sample_params(&mut ChaCha8Rng::seed_from_u64(2)));
+        let before = body.clone();
+        let torso: Vec<u8> = vec![2, 3];
+        breathe(&mut body, &torso, 0.008);
+        let moved: Vec<f32> = before
+            .vertices
+            .iter()
+            .zip(&body.vertices)
+            .map(|(a, b)| (Vector3::from(*a) - Vector3::from(*b)).norm())
+            .collect();
+        let max = moved.iter().cloned().fold(0.0, f32::max);
+        assert!(max > 0.006 && max <= 0.008 + 1e-6, "peak rise {max}");
+        for (i, m) in moved.iter().enumerate() {
+            if !torso.contains(&before.vertex_part[i]) {
+                assert_eq!(*m, 0.0, "limbs and head stay");
+            }
+        }
+        assert!(body.salient[3][2] > before.salient[3][2], "belly point rises");
+        assert_eq!(MANNEQUIN_PARTS[2], "chest");
+    }
+
+    #[test]
+    fn occluded_sequence_writes_playable_oni_and_truth() {
+        let dir = std::env::temp_dir().join(format!("supine-seq-test-{}", std::process::id()));
+        let cfg = SequenceConfig {
+            sweep_period_s: 0.2,
+            ..SequenceConfig::new(6, 4, true)
+        };
+        let summary = generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
+        assert_eq!(summary.frames, 6);
+        assert!(
+            summary.torso_occluded_max > 0.02,
+            "the arm hides part of the torso: {}",
+            summary.torso_occluded_max
+        );
+        let lines: Vec<FrameTruth> = std::fs::read_to_string(dir.join("truth.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        assert_eq!(lines.len(), 6);
+        assert!(lines.iter().all(|l| l.camera_from_probe.is_some()));
+        assert_eq!(lines[1].time_us, 33_333);
+        let mut reader = supine_drivers::oni::OniReader::open(dir.join("sequence.oni")).unwrap();
+        let mut frames = 0;
+        loop {
+            match reader.read_frame() {
+                Ok(frame) => {
+                    assert!(frame.depth_mm().iter().filter(|&&d| d > 0).count() > 50_000);
+                    assert_eq!(frame.capture_us, lines[frames].time_us);
+                    frames += 1;
+                }
+                Err(e) if e.kind() == supine_drivers::ErrorKind::EndOfStream => break,
+                Err(e) => panic!("reading the recording: {e}"),
+            }
+        }
+        assert_eq!(frames, 6);
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
