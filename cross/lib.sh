@@ -14,13 +14,13 @@ cross_target_dir=${SUPINE_CROSS_TARGET_DIR:-$root/target/cross}
 cross_out=$root/cross/out
 
 die() {
-    echo "${0##*/}: error: $*" >&2
+    echo "cross/${0##*/}: error: $*" >&2
     exit 1
 }
 
 usage_error() {
-    echo "${0##*/}: $*" >&2
-    echo "Try '${0##*/} --help'." >&2
+    echo "cross/${0##*/}: $*" >&2
+    echo "Try 'cross/${0##*/} --help'." >&2
     exit 2
 }
 

@@ -34,14 +34,27 @@ pub const KINECT_V1_VFOV_RAD: f32 = 45.6 * core::f32::consts::PI / 180.0;
 impl Intrinsics {
     /// The Kinect v1 depth camera at 640x480 as OpenNI2 models it: fx = 320 / tan(58.5°/2) = 571.4 px,
     /// principal point at the image centre (OpenNI's world conversion puts it exactly at W/2, H/2).
-    pub const KINECT_V1: Intrinsics =
-        Intrinsics { fx: 571.401, fy: 571.401, cx: 320.0, cy: 240.0, width: 640, height: 480 };
+    pub const KINECT_V1: Intrinsics = Intrinsics {
+        fx: 571.401,
+        fy: 571.401,
+        cx: 320.0,
+        cy: 240.0,
+        width: 640,
+        height: 480,
+    };
 
     /// Intrinsics from horizontal and vertical fields of view (radians), principal point at the image centre.
     pub fn from_fov(width: u16, height: u16, hfov_rad: f32, vfov_rad: f32) -> Self {
         let fx = width as f32 * 0.5 / libm::tanf(hfov_rad * 0.5);
         let fy = height as f32 * 0.5 / libm::tanf(vfov_rad * 0.5);
-        Intrinsics { fx, fy, cx: width as f32 * 0.5, cy: height as f32 * 0.5, width, height }
+        Intrinsics {
+            fx,
+            fy,
+            cx: width as f32 * 0.5,
+            cy: height as f32 * 0.5,
+            width,
+            height,
+        }
     }
 
     /// Horizontal field of view in radians.

@@ -45,7 +45,11 @@ static CRC32C_TABLE: [u32; 256] = {
         let mut c = i as u32;
         let mut k = 0;
         while k < 8 {
-            c = if c & 1 != 0 { 0x82F6_3B78 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0x82F6_3B78 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
             k += 1;
         }
         table[i] = c;
@@ -61,7 +65,11 @@ static CRC16_TABLE: [u16; 256] = {
         let mut c = (i as u16) << 8;
         let mut k = 0;
         while k < 8 {
-            c = if c & 0x8000 != 0 { (c << 1) ^ 0x1021 } else { c << 1 };
+            c = if c & 0x8000 != 0 {
+                (c << 1) ^ 0x1021
+            } else {
+                c << 1
+            };
             k += 1;
         }
         table[i] = c;
@@ -111,6 +119,9 @@ mod tests {
         let s = crc32c_update(0xFFFF_FFFF, &CHECK[..4]);
         assert_eq!(crc32c_update(s, &CHECK[4..]) ^ 0xFFFF_FFFF, crc32c(CHECK));
         let s = crc8_sae_j1850_update(0xFF, &CHECK[..3]);
-        assert_eq!(crc8_sae_j1850_update(s, &CHECK[3..]) ^ 0xFF, crc8_sae_j1850(CHECK));
+        assert_eq!(
+            crc8_sae_j1850_update(s, &CHECK[3..]) ^ 0xFF,
+            crc8_sae_j1850(CHECK)
+        );
     }
 }

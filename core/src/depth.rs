@@ -63,9 +63,18 @@ impl<'a> DepthFrame<'a> {
             return Err(FrameError::Empty);
         }
         if depth_mm.len() != expected {
-            return Err(FrameError::WrongLength { expected, actual: depth_mm.len() });
+            return Err(FrameError::WrongLength {
+                expected,
+                actual: depth_mm.len(),
+            });
         }
-        Ok(DepthFrame { depth_mm, width, height, capture_us, index })
+        Ok(DepthFrame {
+            depth_mm,
+            width,
+            height,
+            capture_us,
+            index,
+        })
     }
 
     /// The pixels, row-major, millimetres, 0 = no depth.
@@ -102,9 +111,15 @@ mod tests {
         assert!(DepthFrame::new(&buf, 4, 3, 0, 0).is_ok());
         assert_eq!(
             DepthFrame::new(&buf, 4, 4, 0, 0).unwrap_err(),
-            FrameError::WrongLength { expected: 16, actual: 12 }
+            FrameError::WrongLength {
+                expected: 16,
+                actual: 12
+            }
         );
-        assert_eq!(DepthFrame::new(&buf[..0], 0, 3, 0, 0).unwrap_err(), FrameError::Empty);
+        assert_eq!(
+            DepthFrame::new(&buf[..0], 0, 3, 0, 0).unwrap_err(),
+            FrameError::Empty
+        );
     }
 
     #[test]

@@ -18,5 +18,5 @@ pub mod body_model;
 pub mod camera;
 pub mod crc;
 pub mod depth;
-pub mod wire;
 pub mod model_file;
+pub mod wire;

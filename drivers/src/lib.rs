@@ -3,6 +3,8 @@
 //! Depth sources lend [`supine_core::depth::DepthFrame`]s; packet links carry `supine_core::wire` messages to and
 //! from the arm controller. `unsafe` lives only in one `sys` module per FFI backend.
 
+#[cfg(test)]
+mod c_probe;
 pub mod fault;
 #[cfg(feature = "freenect")]
 pub mod freenect;

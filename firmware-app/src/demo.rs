@@ -142,10 +142,10 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         }
     }
     eprintln!();
-    if let Some(link) = sink.as_mut() {
-        if let Err(e) = link.close(Duration::from_secs(2)) {
-            eprintln!("supine demo: closing the sink: {e}");
-        }
+    if let Some(link) = sink.as_mut()
+        && let Err(e) = link.close(Duration::from_secs(2))
+    {
+        eprintln!("supine demo: closing the sink: {e}");
     }
     let frames = latencies.len();
     if frames == 0 {
@@ -163,7 +163,10 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     println!("  {:<34} {:.1}", "throughput (frames/s)", frames as f64 / wall);
     println!("  {:<34} {:.3} / {:.3}", "latency p50 / p99 (ms)", p50, p99);
     println!("  {:<34} {:.1} %", "valid depth in 0.5-4.5 m", valid_mean * 100.0);
-    println!("  {:<34} {} ({} B)", "health packets encoded", frames, bytes_encoded);
+    println!(
+        "  {:<34} {} ({} B)",
+        "health packets encoded", frames, bytes_encoded
+    );
     if let Some(s) = &args.sink {
         println!("  {:<34} {} ({} send errors)", "sent to", s, send_errors);
     }
@@ -180,8 +183,11 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             "tracker": "not built",
             "recording": path.display().to_string(),
         });
-        std::fs::write(out, serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?)
-            .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+        std::fs::write(
+            out,
+            serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?,
+        )
+        .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
     }
     Ok(())
 }

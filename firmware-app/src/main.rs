@@ -48,7 +48,10 @@ fn init_tracing(verbose: u8) {
     };
     let filter = EnvFilter::try_from_env("SUPINE_LOG").unwrap_or_else(|_| EnvFilter::new(default));
     // Logs go to stderr so that stdout stays machine-readable (JSON lines, candump, ...).
-    let _ = tracing_subscriber::fmt().with_env_filter(filter).with_writer(std::io::stderr).try_init();
+    let _ = tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_writer(std::io::stderr)
+        .try_init();
 }
 
 fn main() -> std::process::ExitCode {

@@ -20,9 +20,7 @@ import os
 import sys
 import time
 
-BASE = 0x100
-VERSION = 1
-KINDS = ["command", "arm_state", "torso_pose", "probe", "salient_points", "health", "body_shape"]
+from supine_wire import BASE, KINDS, e2e_crc
 
 
 def fail(msg):
@@ -30,18 +28,6 @@ def fail(msg):
     sys.exit(1)
 
 
-def crc8_sae_j1850(data):
-    crc = 0xFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
-
-
-def e2e_crc(frame_id, data):
-    offset = frame_id - BASE
-    return crc8_sae_j1850(bytes([offset & 0xFF, VERSION]) + bytes(data[1:8]))
 
 
 def open_bus(channel):

@@ -12,21 +12,11 @@ import json
 import re
 import sys
 
-BASE = 0x100
-KIND_BLOCK = {"command": 0, "arm_state": 1, "torso_pose": 2, "probe": 3, "salient_points": 4, "health": 5,
-              "body_shape": 6}
+from supine_wire import BASE, KIND_BLOCK, crc8_sae_j1850
+
 POINT_FRAMES = [("head", "POINT_HEAD", "ConfHead"), ("left_shoulder", "POINT_L_SHOULDER", "ConfLShoulder"),
                 ("right_shoulder", "POINT_R_SHOULDER", "ConfRShoulder"), ("belly", "POINT_BELLY", "ConfBelly"),
                 ("left_hip", "POINT_L_HIP", "ConfLHip"), ("right_hip", "POINT_R_HIP", "ConfRHip")]
-
-
-def crc8_j1850(data):
-    crc = 0xFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = ((crc << 1) ^ 0x1D) & 0xFF if crc & 0x80 else (crc << 1) & 0xFF
-    return crc ^ 0xFF
 
 
 def xyz(out, frame, prefix, v):
@@ -124,7 +114,7 @@ def main():
             key, _, value = sig.partition(": ")
             got = parse_value(value)
             if key == "Crc":
-                exp = crc8_j1850([data_id & 0xFF, data_id >> 8] + list(data[1:]))
+                exp = crc8_sae_j1850([data_id & 0xFF, data_id >> 8] + list(data[1:]))
             elif key == "Counter":
                 exp = seq & 0xF
             elif (name, key) in want:

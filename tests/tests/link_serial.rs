@@ -131,6 +131,27 @@ fn messages_flow_both_ways() {
     assert_eq!(link.counters().rx_messages, incoming.len() as u64);
 }
 
+/// An idle line is not a hang-up: polling a port with nothing to read for a while must not disconnect it (with
+/// `VMIN = 0` a tty read returns 0 for "no data", which once made the port reconnect every 50 ms and lose the frames
+/// that arrived while it was closed), and a message arriving after the idle spell is received.
+#[test]
+fn an_idle_port_stays_up_and_loses_nothing() {
+    let mut peer = serial_peer();
+    let mut link = serial_link(&peer.slave_path);
+    let idle_until = Instant::now() + Duration::from_millis(300);
+    while Instant::now() < idle_until {
+        assert_eq!(link.receive().unwrap(), None);
+        link.wait_readable(Duration::from_millis(5));
+    }
+    assert_eq!(link.counters().disconnects, 0, "an idle port was taken for a hang-up");
+    assert_eq!(link.state(), LinkState::Up);
+    let m = sample::messages()[0];
+    peer.device.send(&m).unwrap();
+    let got = collect(&mut link, &mut peer.device, 1, Duration::from_secs(3));
+    assert_eq!(got, vec![m]);
+    assert_eq!(link.counters().disconnects, 0);
+}
+
 #[test]
 fn garbage_is_counted_never_fatal() {
     let pty = open_pty().unwrap();

@@ -695,12 +695,13 @@ mod tests {
     /// Compiles a C++ probe with g++ against /usr/include/openni2 and compares sizes, offsets and constants.
     #[test]
     fn layouts_match_the_openni2_headers() {
-        let dir = std::env::temp_dir().join(format!("supine-oni-probe-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let src = dir.join("probe.cpp");
-        let exe = dir.join("probe");
-        std::fs::write(
-            &src,
+        let c = crate::c_probe::run(
+            &crate::c_probe::Compiler {
+                env_var: "CXX",
+                default: "g++",
+            },
+            &["-I/usr/include/openni2"],
+            "probe.cpp",
             r#"#include <cstdio>
 #include <cstddef>
 #include <OniCAPI.h>
@@ -725,27 +726,7 @@ int main() {
   return 0;
 }
 "#,
-        )
-        .unwrap();
-        let built = std::process::Command::new(std::env::var("CXX").unwrap_or_else(|_| "g++".into()))
-            .arg("-I/usr/include/openni2")
-            .arg(&src)
-            .arg("-o")
-            .arg(&exe)
-            .output()
-            .expect("g++ is needed for the openni2 feature's layout test");
-        assert!(
-            built.status.success(),
-            "probe failed to compile: {}",
-            String::from_utf8_lossy(&built.stderr)
         );
-        let out = std::process::Command::new(&exe).output().unwrap();
-        let text = String::from_utf8(out.stdout).unwrap();
-        let c: std::collections::HashMap<&str, i64> = text
-            .lines()
-            .filter_map(|l| l.split_once(' '))
-            .map(|(k, v)| (k, v.parse().unwrap()))
-            .collect();
         let rust: &[(&str, i64)] = &[
             ("frame", size_of::<OniFrame>() as i64),
             ("frame.data", offset_of!(OniFrame, data) as i64),
@@ -781,15 +762,6 @@ int main() {
             ("API_VERSION", API_VERSION as i64),
             ("TIMEOUT_FOREVER", TIMEOUT_FOREVER as i64),
         ];
-        assert_eq!(c.len(), rust.len(), "probe output: {text}");
-        for (name, value) in rust {
-            assert_eq!(
-                c.get(name),
-                Some(value),
-                "{name}: C++ says {:?}, Rust says {value}",
-                c.get(name)
-            );
-        }
-        let _ = std::fs::remove_dir_all(&dir);
+        crate::c_probe::assert_matches(&c, rust);
     }
 }

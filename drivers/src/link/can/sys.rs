@@ -225,6 +225,55 @@ mod tests {
         assert_eq!(size_of::<IfreqIndex>(), size_of::<libc::ifreq>());
     }
 
+    /// The same numbers read from the kernel headers themselves by a compiled C probe.
+    #[test]
+    fn layouts_match_a_c_probe_of_linux_can_h() {
+        let c = crate::c_probe::run(
+            &crate::c_probe::Compiler {
+                env_var: "CC",
+                default: "cc",
+            },
+            &[],
+            "probe.c",
+            r#"#include <stdio.h>
+#include <stddef.h>
+#include <sys/socket.h>
+#include <net/if.h>
+#include <sys/ioctl.h>
+#include <linux/can.h>
+#include <linux/can/raw.h>
+#include <linux/can/error.h>
+#define P(name, v) printf("%s %ld\n", name, (long)(v))
+int main(void) {
+  P("can_frame", sizeof(struct can_frame)); P("can_frame.data", offsetof(struct can_frame, data));
+  P("sockaddr_can", sizeof(struct sockaddr_can)); P("ifreq", sizeof(struct ifreq));
+  P("AF_CAN", AF_CAN); P("CAN_RAW", CAN_RAW); P("SOL_CAN_RAW", SOL_CAN_RAW);
+  P("CAN_RAW_ERR_FILTER", CAN_RAW_ERR_FILTER); P("SIOCGIFINDEX", SIOCGIFINDEX);
+  P("CAN_EFF_FLAG", CAN_EFF_FLAG); P("CAN_RTR_FLAG", CAN_RTR_FLAG); P("CAN_ERR_FLAG", CAN_ERR_FLAG);
+  P("CAN_ERR_BUSOFF", CAN_ERR_BUSOFF); P("IFNAMSIZ", IFNAMSIZ);
+  return 0;
+}
+"#,
+        );
+        let rust: &[(&str, i64)] = &[
+            ("can_frame", size_of::<CanFrameRaw>() as i64),
+            ("can_frame.data", offset_of!(CanFrameRaw, data) as i64),
+            ("sockaddr_can", size_of::<SockaddrCan>() as i64),
+            ("ifreq", size_of::<libc::ifreq>() as i64),
+            ("AF_CAN", AF_CAN as i64),
+            ("CAN_RAW", CAN_RAW as i64),
+            ("SOL_CAN_RAW", SOL_CAN_RAW as i64),
+            ("CAN_RAW_ERR_FILTER", CAN_RAW_ERR_FILTER as i64),
+            ("SIOCGIFINDEX", SIOCGIFINDEX as i64),
+            ("CAN_EFF_FLAG", CAN_EFF_FLAG as i64),
+            ("CAN_RTR_FLAG", CAN_RTR_FLAG as i64),
+            ("CAN_ERR_FLAG", CAN_ERR_FLAG as i64),
+            ("CAN_ERR_BUSOFF", CAN_ERR_BUSOFF as i64),
+            ("IFNAMSIZ", IFNAMSIZ as i64),
+        ];
+        crate::c_probe::assert_matches(&c, rust);
+    }
+
     #[test]
     fn constants_match_libc() {
         assert_eq!(AF_CAN, libc::AF_CAN);

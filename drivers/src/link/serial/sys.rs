@@ -63,7 +63,11 @@ pub fn standard_speed(baud: u32) -> Option<libc::speed_t> {
     })
 }
 
-/// Put a tty into raw 8N1 mode without flow control at `baud`, reads returning at once (`VMIN = VTIME = 0`).
+/// Put a tty into raw 8N1 mode without flow control at `baud`, `VMIN = 1`, `VTIME = 0`.
+///
+/// With `O_NONBLOCK` a read then fails with `EAGAIN` when no byte is waiting and returns 0 only on hang-up. With
+/// `VMIN = 0` the kernel's n_tty returns 0 for "no data" even on a non-blocking fd, which the port would take for
+/// a hang-up and reconnect in a loop, losing whatever arrived while the port was closed.
 ///
 /// `cfmakeraw` clears ICRNL/IXON/ECHO/ICANON/OPOST and friends (without it 0x0d becomes 0x0a, XON is swallowed and
 /// bytes echo back); then CLOCAL|CREAD on, CRTSCTS/CSTOPB/PARENB off, CS8. A standard rate goes through
@@ -82,7 +86,7 @@ pub fn configure_raw(fd: BorrowedFd<'_>, baud: u32) -> io::Result<()> {
     tio.c_cflag &= !(libc::CRTSCTS | libc::CSTOPB | libc::PARENB | libc::CSIZE);
     tio.c_cflag |= libc::CS8;
     tio.c_iflag &= !(libc::IXON | libc::IXOFF | libc::IXANY);
-    tio.c_cc[libc::VMIN] = 0;
+    tio.c_cc[libc::VMIN] = 1;
     tio.c_cc[libc::VTIME] = 0;
     let standard = standard_speed(baud);
     if let Some(speed) = standard {
