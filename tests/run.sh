@@ -13,12 +13,12 @@ root=$(pwd)
 passed=0
 failed=0
 failures=()
-skip=",${SUPINE_SKIP:-},"
 
 step() {
     local name=$1
     shift
-    for word in ${SUPINE_SKIP//,/ }; do
+    local skip=${SUPINE_SKIP:-}
+    for word in ${skip//,/ }; do
         if [[ $name == *"$word"* ]]; then
             echo "=== skip $name (SUPINE_SKIP)"
             return 0
@@ -57,6 +57,8 @@ if [[ -x cross/setup ]]; then
     step cross-setup cross/setup
     step cross-build cross/build aarch64
     step cross-test cross/test aarch64
+    # The head-computer package: built from the cross build, installed, reinstalled, removed and purged in a scratch root.
+    step cross-package cross/package aarch64 --verify
 fi
 
 echo

@@ -143,7 +143,11 @@ fn an_idle_port_stays_up_and_loses_nothing() {
         assert_eq!(link.receive().unwrap(), None);
         link.wait_readable(Duration::from_millis(5));
     }
-    assert_eq!(link.counters().disconnects, 0, "an idle port was taken for a hang-up");
+    assert_eq!(
+        link.counters().disconnects,
+        0,
+        "an idle port was taken for a hang-up"
+    );
     assert_eq!(link.state(), LinkState::Up);
     let m = sample::messages()[0];
     peer.device.send(&m).unwrap();

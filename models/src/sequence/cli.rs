@@ -66,7 +66,7 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
             .map_err(|e| anyhow::anyhow!("progress template: {e}"))?
             .progress_chars("=> "),
     );
-    let summary = generate(source.as_ref(), &cfg, &args.out, &|| bar.inc(1))?;
+    let summary = generate(source.as_ref(), &cfg, &args.out, &mut |_, _| bar.inc(1))?;
     bar.finish();
     eprintln!(
         "{} frames in {}: torso occluded {:.0} % on average, {:.0} % at most; {:.1} frames/s",

@@ -179,12 +179,13 @@ pub fn breathe(body: &mut PosedBody, torso_parts: &[u8], rise: f32) {
     body.salient[3] = (belly + up * (rise * weight(belly, up))).into();
 }
 
-/// Generate a sequence into `dir`; `on_frame` is called after each frame.
+/// Generate a sequence into `dir`; `on_frame` is called after each frame with its index and the noisy depth image
+/// written to the .oni (the ground truth a replay must reproduce pixel for pixel).
 pub fn generate(
     source: &dyn BodySource,
     cfg: &SequenceConfig,
     dir: &Path,
-    on_frame: &dyn Fn(),
+    on_frame: &mut dyn FnMut(u32, &[u16]),
 ) -> Result<SequenceSummary> {
     ensure!(cfg.frames > 0, "need at least one frame");
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
@@ -345,7 +346,7 @@ pub fn generate(
                 k.height as usize,
             )?;
         }
-        on_frame();
+        on_frame(f, &depth);
     }
     truth.flush()?;
     oni.finish()
@@ -394,7 +395,7 @@ mod tests {
             sweep_period_s: 0.2,
             ..SequenceConfig::new(6, 4, true)
         };
-        let summary = generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
+        let summary = generate(&Mannequin, &cfg, &dir, &mut |_, _| {}).unwrap();
         assert_eq!(summary.frames, 6);
         assert!(
             summary.torso_occluded_max > 0.02,
