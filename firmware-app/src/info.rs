@@ -30,16 +30,11 @@ pub fn run(args: InfoArgs) -> Result<(), Failure> {
 /// The model files present (name and size); "none yet" when the directory is missing or empty.
 fn models_section(dir: &Path) -> String {
     let mut s = format!("models ({}):\n", dir.display());
-    let mut files: Vec<(String, u64)> = match std::fs::read_dir(dir) {
+    let mut files: Vec<std::path::PathBuf> = match std::fs::read_dir(dir) {
         Ok(entries) => entries
             .filter_map(|e| e.ok())
             .filter(|e| e.file_type().is_ok_and(|t| t.is_file()))
-            .map(|e| {
-                (
-                    e.file_name().to_string_lossy().into_owned(),
-                    e.metadata().map(|m| m.len()).unwrap_or(0),
-                )
-            })
+            .map(|e| e.path())
             .collect(),
         Err(_) => Vec::new(),
     };
@@ -47,10 +42,41 @@ fn models_section(dir: &Path) -> String {
     if files.is_empty() {
         s.push_str("  none yet\n");
     }
-    for (name, size) in files {
-        let _ = writeln!(s, "  {name}  {size} bytes");
+    for path in files {
+        let name = path
+            .file_name()
+            .map(|n| n.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        let line = match std::fs::read(&path) {
+            Ok(bytes) => format!("{} bytes, {}", bytes.len(), describe_model(&bytes)),
+            Err(e) => format!("unreadable: {e}"),
+        };
+        let _ = writeln!(s, "  {name}  {line}");
     }
     s
+}
+
+/// What a model file is and whether it validates (magic, versions, sizes, checksum), as core would load it.
+fn describe_model(bytes: &[u8]) -> String {
+    use supine_core::{body_model, model_file};
+    if bytes.get(..8) != Some(&model_file::MAGIC[..]) {
+        return "not a supine model file".to_owned();
+    }
+    let kind = bytes.get(12..16).unwrap_or_default();
+    if kind == body_model::KIND {
+        return match body_model::BodyModelView::parse(bytes) {
+            Ok(view) => format!(
+                "body model v{}, {} vertices, valid",
+                body_model::FORMAT_VERSION,
+                view.vertex_count()
+            ),
+            Err(e) => format!("INVALID body model: {e}"),
+        };
+    }
+    format!(
+        "model kind {:?}: not known to this build",
+        String::from_utf8_lossy(kind)
+    )
 }
 
 /// Depth devices visible to each backend of this build.
@@ -131,7 +157,26 @@ mod tests {
         assert!(models_section(&dir).contains("none yet"));
         std::fs::write(dir.join("joints.forest"), [0u8; 12]).unwrap();
         let s = models_section(&dir);
-        assert!(s.contains("joints.forest  12 bytes"), "{s}");
+        assert!(
+            s.contains("joints.forest  12 bytes, not a supine model file"),
+            "{s}"
+        );
+        let mut body = std::fs::read(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/../models/artifacts/body.sbm"
+        ))
+        .unwrap();
+        std::fs::write(dir.join("body.sbm"), &body).unwrap();
+        assert!(
+            models_section(&dir).contains("body model v1, 13380 vertices, valid"),
+            "{}",
+            models_section(&dir)
+        );
+        let last = body.len() - 1;
+        body[last] ^= 0xFF;
+        std::fs::write(dir.join("body.sbm"), &body).unwrap();
+        let s = models_section(&dir);
+        assert!(s.contains("INVALID body model"), "{s}");
         std::fs::remove_dir_all(&dir).unwrap();
         assert!(models_section(Path::new("/nonexistent/supine")).contains("none yet"));
     }
