@@ -75,8 +75,11 @@ pub fn ensure_wheel_with(cache: &Path, python: &str) -> Result<(PathBuf, WheelOr
     std::fs::create_dir_all(cache)
         .with_context(|| format!("cannot create cache folder {}", cache.display()))?;
     // Download into a private folder and move it into place only once verified, so an interrupted or tampered
-    // download never poisons the cache.
-    let tmp = cache.join(format!("download-{}", std::process::id()));
+    // download never poisons the cache. Private per call, not per process: tests fill the cache from several
+    // threads at once, and a rename onto the same verified file is harmless.
+    static DOWNLOADS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let call = DOWNLOADS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let tmp = cache.join(format!("download-{}-{call}", std::process::id()));
     std::fs::create_dir_all(&tmp).with_context(|| format!("cannot create {}", tmp.display()))?;
     let out = Command::new(python)
         .args([
