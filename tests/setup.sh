@@ -33,6 +33,7 @@ fi
 
 if ! command -v cargo-fuzz >/dev/null 2>&1 && [[ ! -x $HOME/.cargo/bin/cargo-fuzz ]]; then
     echo "setup: installing cargo-fuzz"
-    cargo install --locked cargo-fuzz
+    # Pinned: the version the fuzz targets were written and run with; a newer one may need a newer rustc.
+    cargo install --locked --version 0.13.2 cargo-fuzz
 fi
 echo "setup: ok"

@@ -18,11 +18,10 @@ pub struct Compiler {
 ///
 /// Panics with the compiler's message when the probe does not build: in a layout test that is a failure, never a skip.
 pub fn run(compiler: &Compiler, args: &[&str], file_name: &str, source: &str) -> HashMap<String, i64> {
-    let dir: PathBuf = std::env::temp_dir().join(format!(
-        "supine-probe-{}-{}",
-        file_name.replace('.', "-"),
-        std::process::id()
-    ));
+    // One folder per call: tests run as threads of one process, and two probes may share a file name.
+    static CALLS: std::sync::atomic::AtomicU64 = std::sync::atomic::AtomicU64::new(0);
+    let call = CALLS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir: PathBuf = std::env::temp_dir().join(format!("supine-probe-{}-{call}", std::process::id()));
     std::fs::create_dir_all(&dir).expect("creating the probe directory");
     let src = dir.join(file_name);
     let exe = dir.join("probe");

@@ -39,7 +39,8 @@ pub const Y10B_FRAME_BYTES: usize = 640 * 480 * 10 / 8;
 pub const PACKED11_FRAME_BYTES: usize = 640 * 480 * 11 / 8;
 /// The 11-bit raw value that marks "no measurement".
 pub const RAW11_NO_VALUE: u16 = 2047;
-/// The largest depth the conversions return; anything beyond is reported as 0 (no depth), like libfreenect's clamp.
+/// The depth limit of the conversions: they return less than this, anything else is 0 (no depth), like libfreenect's
+/// clamp; it is also the .oni writer's max depth, which 16zT needs every value to stay under.
 pub const MAX_DEPTH_MM: u16 = 10_000;
 
 /// Unpack `Y10B` (4 pixels per 5 bytes, MSB first) into `out`; unpacks `min(out.len(), packed.len() * 4 / 5)` pixels
@@ -120,7 +121,8 @@ impl Ps1080Params {
             return None;
         }
         let mm = self.shift_scale * (m * self.zpd / (self.lddis - m) + self.zpd);
-        (mm > 0.0 && mm <= MAX_DEPTH_MM as f64).then_some(mm)
+        // Strictly below: 16zT recordings (and OpenNI2) need every value under the stream's max depth.
+        (mm > 0.0 && mm < MAX_DEPTH_MM as f64).then_some(mm)
     }
 
     /// The 2048-entry shift→mm table (0 = no depth) for per-pixel conversion of 11-bit frames.
@@ -273,7 +275,7 @@ impl DisparityTable {
         for (raw, slot) in mm.iter_mut().enumerate().take(1023) {
             if let Some(z) = calibration.depth_m(raw as f64) {
                 let v = (z * 1000.0).round();
-                if v > 0.0 && v <= MAX_DEPTH_MM as f64 {
+                if v > 0.0 && v < MAX_DEPTH_MM as f64 {
                     *slot = v as u16;
                 }
             }

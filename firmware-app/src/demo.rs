@@ -27,7 +27,7 @@ const WORKING_RANGE_MM: std::ops::RangeInclusive<u16> = 500..=4500;
 #[derive(Args)]
 pub struct DemoArgs {
     /// Process at most this many frames (default: the whole recording).
-    #[arg(long)]
+    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
     pub frames: Option<u32>,
     /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`
     /// (default: encoded and counted, sent nowhere).
@@ -142,10 +142,13 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         }
     }
     eprintln!();
-    if let Some(link) = sink.as_mut()
-        && let Err(e) = link.close(Duration::from_secs(2))
-    {
-        eprintln!("supine demo: closing the sink: {e}");
+    // Messages a full link queue evicted (newest wins): a replay runs faster than a slow line can carry.
+    let mut dropped = 0u64;
+    if let Some(link) = sink.as_mut() {
+        if let Err(e) = link.close(Duration::from_secs(2)) {
+            eprintln!("supine demo: closing the sink: {e}");
+        }
+        dropped = link.counters().dropped;
     }
     let frames = latencies.len();
     if frames == 0 {
@@ -157,21 +160,31 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     let p99 = percentile_ms(&latencies, 99.0);
     let valid_mean = valid_fraction_sum / frames as f64;
 
-    println!("supine demo summary");
-    println!("  {:<34} {}", "recording", path.display());
-    println!("  {:<34} {}", "frames", frames);
-    println!("  {:<34} {:.1}", "throughput (frames/s)", frames as f64 / wall);
-    println!("  {:<34} {:.3} / {:.3}", "latency p50 / p99 (ms)", p50, p99);
-    println!("  {:<34} {:.1} %", "valid depth in 0.5-4.5 m", valid_mean * 100.0);
-    println!(
-        "  {:<34} {} ({} B)",
-        "health packets encoded", frames, bytes_encoded
-    );
+    // With `--sink stdout` the packets own stdout; the table goes to stderr so neither corrupts the other.
+    let mut table = String::new();
+    let mut row = |name: &str, value: String| table.push_str(&format!("  {name:<34} {value}\n"));
+    row("recording", path.display().to_string());
+    row("frames", frames.to_string());
+    row("throughput (frames/s)", format!("{:.1}", frames as f64 / wall));
+    row("latency p50 / p99 (ms)", format!("{p50:.3} / {p99:.3}"));
+    row("valid depth in 0.5-4.5 m", format!("{:.1} %", valid_mean * 100.0));
+    row("health packets encoded", format!("{frames} ({bytes_encoded} B)"));
     if let Some(s) = &args.sink {
-        println!("  {:<34} {} ({} send errors)", "sent to", s, send_errors);
+        row(
+            "sent to",
+            format!("{s} ({send_errors} send errors, {dropped} dropped by the link queue)"),
+        );
     }
-    println!("  {:<34} not built yet: no pose is estimated", "tracker");
-    println!("  {:<34} n/a until the tracker lands", "accuracy vs ground truth");
+    row("tracker", "not built yet: no pose is estimated".to_owned());
+    row(
+        "accuracy vs ground truth",
+        "n/a until the tracker lands".to_owned(),
+    );
+    if args.sink.as_deref() == Some("stdout") {
+        eprint!("supine demo summary\n{table}");
+    } else {
+        print!("supine demo summary\n{table}");
+    }
 
     if let Some(out) = &args.json {
         let report = serde_json::json!({
@@ -179,6 +192,8 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             "latency_ms_p50": p50,
             "latency_ms_p99": p99,
             "valid_depth_fraction": valid_mean,
+            "packets_dropped": dropped,
+            "send_errors": send_errors,
             "tracked_fraction": serde_json::Value::Null,
             "tracker": "not built",
             "recording": path.display().to_string(),

@@ -241,12 +241,14 @@ impl<const N: usize> SlcanReader<N> {
         match byte {
             b'\r' | b'\n' | 0x07 => {
                 let len = core::mem::replace(&mut self.len, 0);
-                if core::mem::replace(&mut self.overflow, false) {
-                    return None;
-                }
+                let overflowed = core::mem::replace(&mut self.overflow, false);
+                // BEL is the adapter's error reply; count it even when it ends an over-long line.
                 if byte == 0x07 {
                     st.device_errors = st.device_errors.saturating_add(1);
                     return Some(Err(SlcanError::DeviceError));
+                }
+                if overflowed {
+                    return None;
                 }
                 if len == 0 {
                     return None;
@@ -369,5 +371,13 @@ mod tests {
         assert_eq!(events, 1 + 1);
         assert_eq!(small.stats().too_long, 1);
         assert_eq!(small.stats().frames, 1);
+        // An adapter error (BEL) that ends an over-long line is still counted.
+        let mut small: SlcanReader<5> = SlcanReader::new();
+        let errors = b"t1232AABB\x07"
+            .iter()
+            .filter_map(|&b| small.push(b))
+            .filter(|e| *e == Err(SlcanError::DeviceError))
+            .count();
+        assert_eq!((errors, small.stats().device_errors), (1, 1));
     }
 }

@@ -177,7 +177,9 @@ impl Port for StdoutPort {
         if self.closed {
             return 0;
         }
-        match io::stdout().lock().write(buf) {
+        // Flush every write: stdout is line-buffered, and binary frames must not wait for a 0x0A byte.
+        let mut out = io::stdout().lock();
+        match out.write(buf).and_then(|n| out.flush().map(|()| n)) {
             Ok(n) => n,
             Err(e) if e.kind() == io::ErrorKind::Interrupted => 0,
             Err(e) => {

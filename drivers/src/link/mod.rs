@@ -21,8 +21,8 @@
 //! # Reconnects
 //! A serial port that hangs up, returns EIO or end of file is closed and reopened at the same path with
 //! exponential back-off (50 ms doubling to 2 s), counted in [`LinkCounters::disconnects`]/`reconnects`. After
-//! each (re)connect the codec's preamble goes out first (a lone `0x00` to resynchronise a COBS receiver; the SLCAN
-//! open sequence), the partly written message restarts from its first byte, and the decoder is reset.
+//! each (re)connect the codec's preamble goes out first (the SLCAN open sequence; serial frames need none, since
+//! each starts with its own `0x00`), the partly written message restarts from its first byte, and the decoder is reset.
 //!
 //! # Allocation
 //! Everything is allocated in [`open`]: queue slots, the receive buffer, the preamble buffer. `send` and

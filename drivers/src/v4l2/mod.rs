@@ -215,6 +215,8 @@ impl DepthSource for V4l2Source {
             newest = b;
         }
         let Some(map) = self.maps.get(newest.index as usize) else {
+            // Give the buffer back anyway, or each such frame would leak one of the few streaming buffers.
+            let _ = sys::qbuf(&self.fd, newest.index);
             return Err(SourceError::new(
                 ErrorKind::CorruptData,
                 "driver returned an unknown buffer index",

@@ -31,7 +31,7 @@ pub fn run(args: &ListenArgs) -> Result<(), Failure> {
         )));
     }
     let idle_timeout = match args.idle_timeout {
-        Some(s) if s.is_finite() && s > 0.0 => Some(Duration::from_secs_f64(s)),
+        Some(s) if s > 0.0 && Duration::try_from_secs_f64(s).is_ok() => Some(Duration::from_secs_f64(s)),
         Some(s) => {
             return Err(Failure::usage(format!(
                 "--idle-timeout: {s} is not a positive number of seconds"

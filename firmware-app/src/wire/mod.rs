@@ -59,7 +59,7 @@ pub struct SendArgs {
     #[arg(long)]
     pub sink: String,
     /// How many rounds of the sample set to send (default: one round).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
     pub count: u32,
     /// Rounds per second.
     #[arg(long, default_value_t = 30.0)]

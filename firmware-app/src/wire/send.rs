@@ -13,6 +13,11 @@ use super::SendArgs;
 use crate::failure::Failure;
 use crate::links;
 
+/// Slowest accepted `--rate` (one round a day).
+const MIN_RATE_HZ: f64 = 1.0 / 86_400.0;
+/// Fastest accepted `--rate`.
+const MAX_RATE_HZ: f64 = 100_000.0;
+
 /// How long closing may take to flush the queue.
 const CLOSE_TIMEOUT: Duration = Duration::from_secs(3);
 
@@ -22,9 +27,10 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
         .sink
         .parse()
         .map_err(|e| Failure::usage(format!("--sink: {e}")))?;
-    if !(args.rate.is_finite() && args.rate > 0.0) {
+    // Bounded so that the period and every round's due time stay representable (no Duration overflow).
+    if !(args.rate.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&args.rate)) {
         return Err(Failure::usage(format!(
-            "--rate: {} is not a positive number of rounds per second",
+            "--rate: {} is not a rate between {MIN_RATE_HZ} and {MAX_RATE_HZ} rounds per second",
             args.rate
         )));
     }
@@ -51,7 +57,9 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
             break;
         }
         // Keep the writer going until the next round is due.
-        let due = start + period.mul_f64(f64::from(round + 1));
+        let Some(due) = period.checked_mul(round + 1).and_then(|d| start.checked_add(d)) else {
+            break;
+        };
         while !links::interrupted() {
             link.poll();
             let now = Instant::now();

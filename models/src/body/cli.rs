@@ -100,7 +100,11 @@ pub fn run_body(args: &BodyArgs) -> Result<()> {
     if let Some(parent) = out.parent() {
         std::fs::create_dir_all(parent).with_context(|| format!("cannot create {}", parent.display()))?;
     }
-    std::fs::write(&out, &built.bytes).with_context(|| format!("cannot write {}", out.display()))?;
+    // Write beside the target and rename: an interrupted build never leaves a truncated committed artifact.
+    let tmp = out.with_extension("sbm.partial");
+    std::fs::write(&tmp, &built.bytes).with_context(|| format!("cannot write {}", tmp.display()))?;
+    std::fs::rename(&tmp, &out)
+        .with_context(|| format!("cannot move {} to {}", tmp.display(), out.display()))?;
     let r = &built.report;
     println!(
         "wrote {} ({} bytes, {:.2} MB)",
