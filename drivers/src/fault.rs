@@ -16,6 +16,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 
 use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::splitmix::SplitMix64;
 
 /// Which faults to inject and how often (probabilities per call, 0..=1).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -64,33 +65,6 @@ pub struct FaultStats {
     pub corrupt_frames: u32,
     /// Delivered frames with corrupted pixels.
     pub corrupted_pixel_frames: u32,
-}
-
-/// SplitMix64: tiny, fast, good enough for fault schedules, and identical on every platform.
-#[derive(Debug, Clone)]
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next_u64(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// Uniform in [0, 1).
-    fn unit(&mut self) -> f64 {
-        (self.next_u64() >> 11) as f64 / (1u64 << 53) as f64
-    }
-
-    fn chance(&mut self, p: f64) -> bool {
-        p > 0.0 && self.unit() < p
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        ((self.next_u64() >> 32) as usize * n) >> 32
-    }
 }
 
 /// Wraps a source and injects faults (see the [module docs](self)).

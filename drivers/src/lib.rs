@@ -15,6 +15,7 @@ pub mod oni;
 pub mod openni2;
 pub mod recording;
 pub mod source;
+mod splitmix;
 pub mod v4l2;
 
 pub use source::{DepthSource, ErrorKind, SourceError, SourceSpec};

@@ -13,6 +13,7 @@ use super::codec::Framing;
 use super::error::LinkError;
 use super::port::LinkState;
 use super::{Encoded, Link, LinkCounters, Tamper};
+use crate::splitmix::SplitMix64;
 
 /// What to inject, with probabilities in 0..=1.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -46,35 +47,6 @@ pub struct FaultCounters {
     pub stalled_calls: u64,
     /// Disconnects forced.
     pub disconnects: u64,
-}
-
-/// SplitMix64 (Steele, Lea, Flood 2014): tiny, seedable, good enough for fault schedules.
-#[derive(Clone, Debug)]
-struct SplitMix64(u64);
-
-impl SplitMix64 {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
-    }
-
-    /// True with probability `p`.
-    fn chance(&mut self, p: f64) -> bool {
-        p > 0.0 && ((self.next() >> 11) as f64 / (1u64 << 53) as f64) < p
-    }
-
-    /// Uniform in `0..n` (`n > 0`).
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n as u64) as usize
-    }
-
-    /// A non-zero byte.
-    fn nonzero_byte(&mut self) -> u8 {
-        (self.below(255) + 1) as u8
-    }
 }
 
 /// A link wrapped with seeded faults; implements [`Link`] itself.
@@ -331,8 +303,8 @@ mod tests {
         let mut a = SplitMix64(7);
         let mut b = SplitMix64(7);
         assert_eq!(
-            (0..5).map(|_| a.next()).collect::<Vec<_>>(),
-            (0..5).map(|_| b.next()).collect::<Vec<_>>()
+            (0..5).map(|_| a.next_u64()).collect::<Vec<_>>(),
+            (0..5).map(|_| b.next_u64()).collect::<Vec<_>>()
         );
         let hits = (0..10_000).filter(|_| a.chance(0.1)).count();
         assert!((800..1200).contains(&hits), "{hits}");

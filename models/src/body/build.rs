@@ -552,11 +552,7 @@ pub fn build(cfg: &BuildConfig) -> Result<Built> {
         subset,
         subset_triangles,
         triangles: tris,
-        bones: rig
-            .bones
-            .iter()
-            .map(|b| (b.name.clone(), b.parent, b.head, b.tail, b.roll as f32))
-            .collect(),
+        bones: bone_rows(&rig),
         joint_names: rig.joints.iter().map(|j| j.name.clone()).collect(),
         skin: rig.skin.clone(),
         max_influences: super::rig::MAX_INFLUENCES,
@@ -570,6 +566,14 @@ pub fn build(cfg: &BuildConfig) -> Result<Built> {
     };
     let bytes = write_body_model(&data)?;
     Ok(Built { bytes, report })
+}
+
+/// The rig's bones as the body file stores them: name, parent, head and tail joint, roll.
+fn bone_rows(rig: &RigDef) -> Vec<(String, Option<usize>, usize, usize, f32)> {
+    rig.bones
+        .iter()
+        .map(|b| (b.name.clone(), b.parent, b.head, b.tail, b.roll as f32))
+        .collect()
 }
 
 /// An exact (non-statistical) model of one phenotype: its rows as the mean, a zero basis. For checks of blending,
@@ -606,11 +610,7 @@ pub fn exact_body_model(cache_dir: &std::path::Path, phenotype: &Phenotype) -> R
         subset,
         subset_triangles: Vec::new(),
         triangles: tris,
-        bones: rig
-            .bones
-            .iter()
-            .map(|b| (b.name.clone(), b.parent, b.head, b.tail, b.roll as f32))
-            .collect(),
+        bones: bone_rows(&rig),
         joint_names: rig.joints.iter().map(|j| j.name.clone()).collect(),
         skin: rig.skin.clone(),
         max_influences: super::rig::MAX_INFLUENCES,
