@@ -1,12 +1,12 @@
-//! [`FaultInjecting`]: a seeded [`DepthSource`] wrapper that misbehaves on purpose, for tests of everything
+//! [`FaultySource`]: a seeded [`DepthSource`] wrapper that misbehaves on purpose, for tests of everything
 //! downstream (the tracker's gap handling, the service's reconnect logic).
 //!
 //! Faults, each drawn per call from a deterministic PRNG (SplitMix64) so a seed reproduces a run exactly:
 //! - **drop**: the inner frame is discarded and the next one fetched (the caller sees a gap in the index);
-//! - **stall**: the call returns [`ErrorKind::Timeout`] without touching the inner source;
-//! - **corrupt frame**: the call returns [`ErrorKind::CorruptData`] (the frame is consumed);
+//! - **stall**: the call returns [`SourceErrorKind::Timeout`] without touching the inner source;
+//! - **corrupt frame**: the call returns [`SourceErrorKind::CorruptData`] (the frame is consumed);
 //! - **corrupt pixels**: a fraction of the pixels get random values (0 or 1..=10000 mm);
-//! - **disconnect after N frames**: every call after N delivered frames returns [`ErrorKind::Disconnected`].
+//! - **disconnect after N frames**: every call after N delivered frames returns [`SourceErrorKind::Disconnected`].
 //!
 //! Per-frame cost: one copy of the frame into a buffer allocated at construction, plus the corrupted pixels.
 
@@ -15,12 +15,12 @@ use std::time::Duration;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 
-use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::source::{DepthSource, SourceError, SourceErrorKind};
 use crate::splitmix::SplitMix64;
 
 /// Which faults to inject and how often (probabilities per call, 0..=1).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct FaultConfig {
+pub struct SourceFaultConfig {
     /// PRNG seed.
     pub seed: u64,
     /// Probability that a frame is dropped.
@@ -37,10 +37,10 @@ pub struct FaultConfig {
     pub disconnect_after: Option<u32>,
 }
 
-impl FaultConfig {
+impl SourceFaultConfig {
     /// No faults at all (a transparent wrapper), with this seed.
     pub fn none(seed: u64) -> Self {
-        FaultConfig {
+        SourceFaultConfig {
             seed,
             drop: 0.0,
             stall: 0.0,
@@ -69,19 +69,19 @@ pub struct FaultStats {
 
 /// Wraps a source and injects faults (see the [module docs](self)).
 #[derive(Debug)]
-pub struct FaultInjecting<S> {
+pub struct FaultySource<S> {
     inner: S,
-    config: FaultConfig,
+    config: SourceFaultConfig,
     rng: SplitMix64,
     buf: Vec<u16>,
     stats: FaultStats,
 }
 
-impl<S: DepthSource> FaultInjecting<S> {
+impl<S: DepthSource> FaultySource<S> {
     /// Wrap `inner`.
-    pub fn new(inner: S, config: FaultConfig) -> Self {
+    pub fn new(inner: S, config: SourceFaultConfig) -> Self {
         let k = inner.intrinsics();
-        FaultInjecting {
+        FaultySource {
             buf: Vec::with_capacity(k.width as usize * k.height as usize),
             inner,
             rng: SplitMix64(config.seed),
@@ -101,7 +101,7 @@ impl<S: DepthSource> FaultInjecting<S> {
     }
 }
 
-impl<S: DepthSource> DepthSource for FaultInjecting<S> {
+impl<S: DepthSource> DepthSource for FaultySource<S> {
     fn next_frame(&mut self, timeout: Duration) -> Result<DepthFrame<'_>, SourceError> {
         if self
             .config
@@ -109,7 +109,7 @@ impl<S: DepthSource> DepthSource for FaultInjecting<S> {
             .is_some_and(|n| self.stats.delivered >= n)
         {
             return Err(SourceError::new(
-                ErrorKind::Disconnected,
+                SourceErrorKind::Disconnected,
                 "injected fault: device disconnected",
             ));
         }
@@ -130,7 +130,7 @@ impl<S: DepthSource> DepthSource for FaultInjecting<S> {
         if self.rng.chance(self.config.corrupt_frame) {
             self.stats.corrupt_frames += 1;
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 "injected fault: corrupt frame",
             ));
         }
@@ -149,7 +149,7 @@ impl<S: DepthSource> DepthSource for FaultInjecting<S> {
         }
         self.stats.delivered += 1;
         DepthFrame::new(&self.buf, w, h, ts, index)
-            .map_err(|e| SourceError::new(ErrorKind::Other, e.to_string()))
+            .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
     }
 
     fn intrinsics(&self) -> Intrinsics {
@@ -196,10 +196,10 @@ mod tests {
         }
     }
 
-    type Outcome = Result<(u32, Vec<u16>), ErrorKind>;
+    type Outcome = Result<(u32, Vec<u16>), SourceErrorKind>;
 
-    fn run(config: FaultConfig, calls: usize) -> (Vec<Outcome>, FaultStats) {
-        let mut s = FaultInjecting::new(ramp(), config);
+    fn run(config: SourceFaultConfig, calls: usize) -> (Vec<Outcome>, FaultStats) {
+        let mut s = FaultySource::new(ramp(), config);
         let out = (0..calls)
             .map(|_| {
                 s.next_frame(Duration::ZERO)
@@ -212,7 +212,7 @@ mod tests {
 
     #[test]
     fn no_faults_is_transparent() {
-        let (out, stats) = run(FaultConfig::none(1), 5);
+        let (out, stats) = run(SourceFaultConfig::none(1), 5);
         let idx: Vec<u32> = out.iter().map(|r| r.as_ref().unwrap().0).collect();
         assert_eq!(idx, [1, 2, 3, 4, 5]);
         assert_eq!(out[2].as_ref().unwrap().1, vec![1003; 48]);
@@ -221,19 +221,19 @@ mod tests {
 
     #[test]
     fn same_seed_same_faults_and_rates_are_plausible() {
-        let cfg = FaultConfig {
+        let cfg = SourceFaultConfig {
             drop: 0.2,
             stall: 0.1,
             corrupt_frame: 0.1,
             corrupt_pixels: 0.3,
             corrupt_pixel_fraction: 0.25,
-            ..FaultConfig::none(42)
+            ..SourceFaultConfig::none(42)
         };
         let (a, sa) = run(cfg, 400);
         let (b, sb) = run(cfg, 400);
         assert_eq!(a, b);
         assert_eq!(sa, sb);
-        let (c, _) = run(FaultConfig { seed: 43, ..cfg }, 400);
+        let (c, _) = run(SourceFaultConfig { seed: 43, ..cfg }, 400);
         assert_ne!(a, c);
         assert!((20..=60).contains(&sa.stalls), "{sa:?}");
         assert!(
@@ -241,7 +241,7 @@ mod tests {
             "{sa:?}"
         );
         assert_eq!(
-            a.iter().filter(|r| **r == Err(ErrorKind::Timeout)).count() as u32,
+            a.iter().filter(|r| **r == Err(SourceErrorKind::Timeout)).count() as u32,
             sa.stalls
         );
         // Dropped frames show as index gaps; corrupted frames differ from the ramp value.
@@ -257,14 +257,14 @@ mod tests {
     #[test]
     fn disconnects_after_n_frames() {
         let (out, stats) = run(
-            FaultConfig {
+            SourceFaultConfig {
                 disconnect_after: Some(3),
-                ..FaultConfig::none(7)
+                ..SourceFaultConfig::none(7)
             },
             6,
         );
         assert!(out[..3].iter().all(|r| r.is_ok()));
-        assert!(out[3..].iter().all(|r| *r == Err(ErrorKind::Disconnected)));
+        assert!(out[3..].iter().all(|r| *r == Err(SourceErrorKind::Disconnected)));
         assert_eq!(stats.delivered, 3);
     }
 }

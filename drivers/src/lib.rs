@@ -18,4 +18,4 @@ pub mod source;
 mod splitmix;
 pub mod v4l2;
 
-pub use source::{DepthSource, ErrorKind, SourceError, SourceSpec};
+pub use source::{DepthSource, SourceError, SourceErrorKind, SourceSpec};

@@ -67,7 +67,7 @@ impl<S: DepthSource, W: Write + Seek> Recording<S, W> {
             Some(w) => w.finish()?,
             None => {
                 return Err(SourceError::new(
-                    crate::source::ErrorKind::Other,
+                    crate::source::SourceErrorKind::Other,
                     "recording already finished",
                 ));
             }
@@ -104,7 +104,7 @@ mod tests {
 
     use super::*;
     use crate::oni::OniReader;
-    use crate::source::ErrorKind;
+    use crate::source::SourceErrorKind;
 
     fn source_file(frames: u32) -> Vec<u8> {
         let k = Intrinsics::from_fov(8, 6, 1.0, 0.8);
@@ -125,7 +125,7 @@ mod tests {
             match rec.next_frame(Duration::ZERO) {
                 Ok(f) => seen.push((f.depth_mm().to_vec(), f.capture_us)),
                 Err(e) => {
-                    assert_eq!(e.kind(), ErrorKind::EndOfStream);
+                    assert_eq!(e.kind(), SourceErrorKind::EndOfStream);
                     break;
                 }
             }
@@ -139,6 +139,9 @@ mod tests {
             assert_eq!(f.depth_mm(), &px[..]);
             assert_eq!(f.capture_us, *ts);
         }
-        assert_eq!(copy.read_frame().unwrap_err().kind(), ErrorKind::EndOfStream);
+        assert_eq!(
+            copy.read_frame().unwrap_err().kind(),
+            SourceErrorKind::EndOfStream
+        );
     }
 }

@@ -8,13 +8,13 @@
 //!
 //! # Timing
 //! `next_frame(timeout)` blocks the calling thread until a frame is available or `timeout` has passed, then returns
-//! [`ErrorKind::Timeout`]. `Duration::ZERO` polls. Live sources deliver at the sensor rate (30 Hz for a Kinect v1) and
+//! [`SourceErrorKind::Timeout`]. `Duration::ZERO` polls. Live sources deliver at the sensor rate (30 Hz for a Kinect v1) and
 //! keep at most one frame queued: a caller that falls behind gets the newest frame and sees the gap in
 //! [`DepthFrame::index`]. File sources never wait: they return the next recorded frame immediately (no pacing to the
-//! recorded rate; pace with the timestamps if needed) and [`ErrorKind::EndOfStream`] after the last one.
+//! recorded rate; pace with the timestamps if needed) and [`SourceErrorKind::EndOfStream`] after the last one.
 //!
 //! # Errors
-//! [`SourceError`] carries an [`ErrorKind`] (what a caller branches on, like embedded-hal's `ErrorKind`) and a message
+//! [`SourceError`] carries an [`SourceErrorKind`] (what a caller branches on, like embedded-hal's `SourceErrorKind`) and a message
 //! for people. Messages for the frequent kinds (timeouts) are static strings, so even the error path does not allocate.
 //!
 //! # Opening by name
@@ -33,7 +33,7 @@ use supine_core::depth::DepthFrame;
 /// What went wrong, coarsely: the part of an error that callers branch on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
 #[non_exhaustive]
-pub enum ErrorKind {
+pub enum SourceErrorKind {
     /// No device answered (none plugged in, wrong index or URI, file missing).
     NoDevice,
     /// The device was there and went away (unplugged, USB reset, stream stopped by the driver).
@@ -54,24 +54,24 @@ pub enum ErrorKind {
     Other,
 }
 
-impl ErrorKind {
+impl SourceErrorKind {
     /// A short lowercase name, e.g. for counters and JSON.
     pub fn as_str(self) -> &'static str {
         match self {
-            ErrorKind::NoDevice => "no device",
-            ErrorKind::Disconnected => "disconnected",
-            ErrorKind::Timeout => "timeout",
-            ErrorKind::CorruptData => "corrupt data",
-            ErrorKind::EndOfStream => "end of stream",
-            ErrorKind::Unsupported => "unsupported",
-            ErrorKind::Io => "i/o error",
-            ErrorKind::InvalidArgument => "invalid argument",
-            ErrorKind::Other => "other",
+            SourceErrorKind::NoDevice => "no device",
+            SourceErrorKind::Disconnected => "disconnected",
+            SourceErrorKind::Timeout => "timeout",
+            SourceErrorKind::CorruptData => "corrupt data",
+            SourceErrorKind::EndOfStream => "end of stream",
+            SourceErrorKind::Unsupported => "unsupported",
+            SourceErrorKind::Io => "i/o error",
+            SourceErrorKind::InvalidArgument => "invalid argument",
+            SourceErrorKind::Other => "other",
         }
     }
 }
 
-impl fmt::Display for ErrorKind {
+impl fmt::Display for SourceErrorKind {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.as_str())
     }
@@ -80,14 +80,14 @@ impl fmt::Display for ErrorKind {
 /// An error from a depth source, a recording or a file: a kind plus a message naming what failed.
 #[derive(Debug)]
 pub struct SourceError {
-    kind: ErrorKind,
+    kind: SourceErrorKind,
     message: Cow<'static, str>,
     io: Option<std::io::Error>,
 }
 
 impl SourceError {
     /// An error of `kind` with a message.
-    pub fn new(kind: ErrorKind, message: impl Into<Cow<'static, str>>) -> Self {
+    pub fn new(kind: SourceErrorKind, message: impl Into<Cow<'static, str>>) -> Self {
         SourceError {
             kind,
             message: message.into(),
@@ -95,13 +95,13 @@ impl SourceError {
         }
     }
 
-    /// An [`ErrorKind::Io`] error (or `NoDevice` for a missing file/device node) wrapping `err`, with context.
+    /// An [`SourceErrorKind::Io`] error (or `NoDevice` for a missing file/device node) wrapping `err`, with context.
     pub fn io(context: impl Into<Cow<'static, str>>, err: std::io::Error) -> Self {
         let kind = match err.kind() {
-            std::io::ErrorKind::NotFound => ErrorKind::NoDevice,
-            std::io::ErrorKind::UnexpectedEof => ErrorKind::CorruptData,
-            std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock => ErrorKind::Timeout,
-            _ => ErrorKind::Io,
+            std::io::ErrorKind::NotFound => SourceErrorKind::NoDevice,
+            std::io::ErrorKind::UnexpectedEof => SourceErrorKind::CorruptData,
+            std::io::ErrorKind::TimedOut | std::io::ErrorKind::WouldBlock => SourceErrorKind::Timeout,
+            _ => SourceErrorKind::Io,
         };
         SourceError {
             kind,
@@ -112,16 +112,16 @@ impl SourceError {
 
     /// The timeout error: static message, no allocation.
     pub fn timeout() -> Self {
-        SourceError::new(ErrorKind::Timeout, "no depth frame within the timeout")
+        SourceError::new(SourceErrorKind::Timeout, "no depth frame within the timeout")
     }
 
     /// The end-of-stream error: static message, no allocation.
     pub fn end_of_stream() -> Self {
-        SourceError::new(ErrorKind::EndOfStream, "end of stream: no more frames")
+        SourceError::new(SourceErrorKind::EndOfStream, "end of stream: no more frames")
     }
 
     /// The coarse kind of this error.
-    pub fn kind(&self) -> ErrorKind {
+    pub fn kind(&self) -> SourceErrorKind {
         self.kind
     }
 
@@ -160,7 +160,7 @@ pub trait DepthSource {
     /// Block until the next frame is available (at most `timeout`) and lend it.
     ///
     /// The frame borrows the source's internal buffer; it is valid until the next call. Errors of kind
-    /// [`ErrorKind::Timeout`] leave the source usable; [`ErrorKind::EndOfStream`] and [`ErrorKind::Disconnected`] are
+    /// [`SourceErrorKind::Timeout`] leave the source usable; [`SourceErrorKind::EndOfStream`] and [`SourceErrorKind::Disconnected`] are
     /// final for this source. Never allocates on success.
     fn next_frame(&mut self, timeout: Duration) -> Result<DepthFrame<'_>, SourceError>;
 
@@ -219,7 +219,7 @@ impl FromStr for SourceSpec {
         };
         let bad = |why: &str| {
             SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 format!(
                     "bad source {s:?}: {why} (expected openni2[:URI], freenect[:INDEX], v4l2:/dev/videoN or file:PATH)"
                 ),
@@ -281,7 +281,7 @@ pub fn open(spec: &SourceSpec) -> Result<Box<dyn DepthSource>, SourceError> {
 
 /// Open the source named by `spec`.
 ///
-/// Fails with [`ErrorKind::Unsupported`] naming the cargo feature when the backend was not compiled in.
+/// Fails with [`SourceErrorKind::Unsupported`] naming the cargo feature when the backend was not compiled in.
 pub fn open_with(spec: &SourceSpec, options: &OpenOptions) -> Result<Box<dyn DepthSource>, SourceError> {
     match spec {
         SourceSpec::File { path } => Ok(Box::new(crate::oni::OniReader::open(path)?)),
@@ -302,14 +302,14 @@ pub fn open_with(spec: &SourceSpec, options: &OpenOptions) -> Result<Box<dyn Dep
         SourceSpec::OpenNi2 { uri } => Ok(Box::new(crate::openni2::OpenNi2Source::open(uri.as_deref())?)),
         #[cfg(not(feature = "openni2"))]
         SourceSpec::OpenNi2 { .. } => Err(SourceError::new(
-            ErrorKind::Unsupported,
+            SourceErrorKind::Unsupported,
             "openni2 support not compiled in: build with --features openni2 (needs libopenni2-dev)",
         )),
         #[cfg(feature = "freenect")]
         SourceSpec::Freenect { index } => Ok(Box::new(crate::freenect::FreenectSource::open(*index)?)),
         #[cfg(not(feature = "freenect"))]
         SourceSpec::Freenect { .. } => Err(SourceError::new(
-            ErrorKind::Unsupported,
+            SourceErrorKind::Unsupported,
             "freenect support not compiled in: build with --features freenect (needs libfreenect-dev)",
         )),
     }
@@ -377,7 +377,7 @@ mod tests {
             ("", "empty"),
         ] {
             let e = s.parse::<SourceSpec>().unwrap_err();
-            assert_eq!(e.kind(), ErrorKind::InvalidArgument);
+            assert_eq!(e.kind(), SourceErrorKind::InvalidArgument);
             assert!(e.to_string().contains(needle), "{s:?}: {e}");
         }
     }
@@ -386,7 +386,7 @@ mod tests {
     #[test]
     fn missing_backend_says_which_feature() {
         let e = open(&SourceSpec::OpenNi2 { uri: None }).err().unwrap();
-        assert_eq!(e.kind(), ErrorKind::Unsupported);
+        assert_eq!(e.kind(), SourceErrorKind::Unsupported);
         assert!(e.to_string().contains("--features openni2"), "{e}");
     }
 
@@ -404,7 +404,7 @@ mod tests {
         })
         .err()
         .unwrap();
-        assert_eq!(e.kind(), ErrorKind::NoDevice);
+        assert_eq!(e.kind(), SourceErrorKind::NoDevice);
         assert!(e.to_string().contains("/nonexistent/x.oni"), "{e}");
     }
 
@@ -414,9 +414,9 @@ mod tests {
             "reading",
             std::io::Error::from(std::io::ErrorKind::PermissionDenied),
         );
-        assert_eq!(e.kind(), ErrorKind::Io);
+        assert_eq!(e.kind(), SourceErrorKind::Io);
         assert!(std::error::Error::source(&e).is_some());
-        assert_eq!(SourceError::timeout().kind(), ErrorKind::Timeout);
+        assert_eq!(SourceError::timeout().kind(), SourceErrorKind::Timeout);
         assert_eq!(
             SourceError::end_of_stream().context("file:x").message(),
             "file:x: end of stream: no more frames"

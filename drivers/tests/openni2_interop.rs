@@ -11,7 +11,7 @@ use std::time::Duration;
 use supine_core::camera::Intrinsics;
 use supine_drivers::oni::{Codec, OniReader, OniWriter};
 use supine_drivers::openni2::OpenNi2Source;
-use supine_drivers::source::{DepthSource, ErrorKind};
+use supine_drivers::source::{DepthSource, SourceErrorKind};
 
 /// libOpenNI2 is one process-wide library: run these tests one at a time.
 static OPENNI: Mutex<()> = Mutex::new(());
@@ -54,7 +54,7 @@ fn read_through_openni2(src: &mut OpenNi2Source) -> Vec<(Vec<u16>, u64, u32)> {
         match src.next_frame(Duration::from_millis(500)) {
             Ok(f) => out.push((f.depth_mm().to_vec(), f.capture_us, f.index)),
             Err(e) => {
-                assert_eq!(e.kind(), ErrorKind::EndOfStream, "{e}");
+                assert_eq!(e.kind(), SourceErrorKind::EndOfStream, "{e}");
                 return out;
             }
         }
@@ -114,7 +114,7 @@ fn our_reader_reads_a_file_recorded_by_openni2() {
         match r.read_frame() {
             Ok(f) => recorded.push((f.depth_mm().to_vec(), f.capture_us, f.index)),
             Err(e) => {
-                assert_eq!(e.kind(), ErrorKind::EndOfStream, "{e}");
+                assert_eq!(e.kind(), SourceErrorKind::EndOfStream, "{e}");
                 break;
             }
         }

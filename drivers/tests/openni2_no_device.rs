@@ -3,7 +3,7 @@
 #![cfg(feature = "openni2")]
 
 use supine_drivers::openni2::{OpenNi2Source, list_devices};
-use supine_drivers::source::ErrorKind;
+use supine_drivers::source::SourceErrorKind;
 
 #[test]
 #[ignore = "needs libOpenNI2; run by tests/run.sh"]
@@ -14,8 +14,8 @@ fn enumeration_without_a_device_is_a_clear_no_device_error() {
         "this test expects a machine without depth sensors: {devices:?}"
     );
     let e = OpenNi2Source::open(None).unwrap_err();
-    assert_eq!(e.kind(), ErrorKind::NoDevice);
+    assert_eq!(e.kind(), SourceErrorKind::NoDevice);
     assert!(e.to_string().contains("no OpenNI2 device found"), "{e}");
     let e = OpenNi2Source::open(Some("/nonexistent/supine.oni")).unwrap_err();
-    assert_eq!(e.kind(), ErrorKind::NoDevice, "{e}");
+    assert_eq!(e.kind(), SourceErrorKind::NoDevice, "{e}");
 }

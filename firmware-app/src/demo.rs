@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use supine_core::wire::{Body, Health, Message, Timestamp, TrackerState};
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
-use supine_drivers::source::{self, DepthSource, ErrorKind, SourceSpec};
+use supine_drivers::source::{self, DepthSource, SourceErrorKind, SourceSpec};
 
 use crate::failure::Failure;
 
@@ -107,7 +107,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         let t0 = Instant::now();
         let frame = match src.next_frame(Duration::from_millis(500)) {
             Ok(f) => f,
-            Err(e) if e.kind() == ErrorKind::EndOfStream => break,
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
             Err(e) => return Err(anyhow::anyhow!("reading {}: {e}", path.display()).into()),
         };
         let depth = frame.depth_mm();

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use supine_drivers::kinect_raw::DisparityCalibration;
 use supine_drivers::oni::{Codec, OniWriter};
-use supine_drivers::source::{self, ErrorKind, OpenOptions, SourceSpec};
+use supine_drivers::source::{self, OpenOptions, SourceErrorKind, SourceSpec};
 
 use crate::failure::Failure;
 
@@ -77,8 +77,8 @@ pub fn run(args: RecordArgs) -> Result<(), Failure> {
                     .map_err(|e| anyhow::anyhow!("writing {}: {e}", args.out.display()))?;
                 last_frame = Instant::now();
             }
-            Err(e) if e.kind() == ErrorKind::EndOfStream => break,
-            Err(e) if e.kind() == ErrorKind::Timeout => {
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e) if e.kind() == SourceErrorKind::Timeout => {
                 if last_frame.elapsed() >= limit {
                     return Err(anyhow::anyhow!("no frame from {spec} for {} ms", args.timeout_ms).into());
                 }

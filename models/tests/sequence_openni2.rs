@@ -6,7 +6,7 @@
 use std::time::Duration;
 
 use supine_drivers::openni2::OpenNi2Source;
-use supine_drivers::source::{DepthSource, ErrorKind};
+use supine_drivers::source::{DepthSource, SourceErrorKind};
 use supine_models::scene::model_body::{BodyKind, open_source};
 use supine_models::sequence::{SequenceConfig, generate};
 
@@ -50,7 +50,7 @@ fn generated_sequence_plays_frame_exact_in_libopenni2() {
     }
     match oni.next_frame(Duration::from_millis(500)) {
         Err(e) => assert!(
-            matches!(e.kind(), ErrorKind::EndOfStream | ErrorKind::Timeout),
+            matches!(e.kind(), SourceErrorKind::EndOfStream | SourceErrorKind::Timeout),
             "after the last frame: {e}"
         ),
         Ok(f) => panic!("libOpenNI2 delivered an extra frame {}", f.index),

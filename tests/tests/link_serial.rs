@@ -12,7 +12,7 @@ use supine_core::wire::serial::MAX_WIRE_LEN;
 use supine_core::wire::{Kind, sample};
 use supine_drivers::link::serial::{SerialCodec, SerialPort, open_pty, tty_mode};
 use supine_drivers::link::{
-    self, FaultConfig, FaultInjecting, Link, LinkOptions, LinkState, PacketLink, Port, SequenceAccounting,
+    self, FaultyLink, Link, LinkFaultConfig, LinkOptions, LinkState, PacketLink, Port, SequenceAccounting,
 };
 
 fn serial_link(path: &std::path::Path) -> PacketLink<SerialPort, SerialCodec> {
@@ -245,7 +245,7 @@ fn fault_injection_accounting_is_exact() {
     let mut peer = serial_peer();
     // Hold a second slave fd open so the master never sees "no slave" (EIO) while the link reconnects.
     let _keep = SerialPort::open(&peer.slave_path, 115_200).unwrap();
-    let config = FaultConfig {
+    let config = LinkFaultConfig {
         seed: 0x5EED,
         drop: 0.02,
         corrupt: 0.10,
@@ -254,7 +254,7 @@ fn fault_injection_accounting_is_exact() {
         disconnect: 0.0,
         disconnect_at: Some(u64::from(N / 2)),
     };
-    let mut link = FaultInjecting::new(serial_link(&peer.slave_path), config);
+    let mut link = FaultyLink::new(serial_link(&peer.slave_path), config);
     let mut acct = SequenceAccounting::new();
     let mut received = Vec::new();
     for seq in 0..N {

@@ -13,7 +13,7 @@ use supine_core::wire::{can_map, sample};
 use supine_drivers::link::can::SlcanCodec;
 use supine_drivers::link::serial::{SerialPort, open_pty};
 use supine_drivers::link::{
-    FaultConfig, FaultInjecting, Link, PacketLink, Port, RxError, SequenceAccounting,
+    FaultyLink, Link, LinkFaultConfig, PacketLink, Port, RxError, SequenceAccounting,
 };
 
 fn slcan_link(path: &std::path::Path) -> PacketLink<SerialPort, SlcanCodec> {
@@ -118,14 +118,14 @@ fn fault_injection_over_slcan_accounting_is_exact() {
     const N: u16 = 300;
     let mut peer = pty_peer(SlcanCodec::new(500_000).unwrap());
     let _keep = SerialPort::open(&peer.slave_path, 115_200).unwrap();
-    let config = FaultConfig {
+    let config = LinkFaultConfig {
         seed: 42,
         drop: 0.02,
         corrupt: 0.10,
         disconnect_at: Some(u64::from(N / 3)),
-        ..FaultConfig::default()
+        ..LinkFaultConfig::default()
     };
-    let mut link = FaultInjecting::new(slcan_link(&peer.slave_path), config);
+    let mut link = FaultyLink::new(slcan_link(&peer.slave_path), config);
     let mut acct = SequenceAccounting::new();
     let mut last = None;
     let observe = |m: supine_core::wire::Message, acct: &mut SequenceAccounting| {

@@ -1,7 +1,7 @@
 //! Link specs and open errors through the public API: every CLI form parses, bad strings name the bad part, and
 //! devices that are missing give clear, typed errors rather than panics.
 
-use supine_drivers::link::{self, Error, ErrorKind, FileMode, LinkOptions, LinkSpec, LinkState};
+use supine_drivers::link::{self, Error, FileMode, LinkErrorKind, LinkOptions, LinkSpec, LinkState};
 
 #[test]
 fn every_cli_form_parses() {
@@ -26,7 +26,7 @@ fn bad_specs_are_invalid_spec_errors_naming_the_part() {
         ("can:", "empty"),
     ] {
         let err = link::open_str(text, &LinkOptions::default()).err().expect(text);
-        assert_eq!(err.kind(), ErrorKind::InvalidSpec, "{text}");
+        assert_eq!(err.kind(), LinkErrorKind::InvalidSpec, "{text}");
         assert!(err.to_string().contains(needle), "{text}: {err}");
     }
 }
@@ -36,7 +36,7 @@ fn missing_serial_device_is_not_found() {
     let err = link::open_str("serial:/dev/does-not-exist-supine", &LinkOptions::default())
         .err()
         .unwrap();
-    assert_eq!(err.kind(), ErrorKind::NotFound);
+    assert_eq!(err.kind(), LinkErrorKind::NotFound);
     assert!(err.to_string().contains("/dev/does-not-exist-supine"), "{err}");
 }
 
@@ -59,7 +59,7 @@ fn a_regular_file_is_not_a_serial_port() {
 fn socketcan_open_error_is_clear() {
     match link::open_str("can:vcan0", &LinkOptions::default()) {
         Err(err) => {
-            assert_eq!(err.kind(), ErrorKind::NotFound, "{err}");
+            assert_eq!(err.kind(), LinkErrorKind::NotFound, "{err}");
             let text = err.to_string();
             assert!(
                 text.contains("this kernel has no SocketCAN support")
@@ -78,7 +78,7 @@ fn socketcan_open_error_is_clear() {
 #[test]
 fn stdout_cannot_receive() {
     let mut link = link::open_str("stdout", &LinkOptions::default()).unwrap();
-    assert_eq!(link.receive().unwrap_err().kind(), ErrorKind::Unsupported);
+    assert_eq!(link.receive().unwrap_err().kind(), LinkErrorKind::Unsupported);
 }
 
 #[test]
@@ -88,7 +88,7 @@ fn slcan_bitrate_must_be_standard() {
         ..LinkOptions::default()
     };
     let err = link::open_str("slcan:/dev/null", &options).err().unwrap();
-    assert_eq!(err.kind(), ErrorKind::InvalidSpec);
+    assert_eq!(err.kind(), LinkErrorKind::InvalidSpec);
     assert!(err.to_string().contains("123456"), "{err}");
 }
 

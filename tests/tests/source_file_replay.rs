@@ -4,10 +4,10 @@
 use std::time::Duration;
 
 use supine_core::camera::Intrinsics;
-use supine_drivers::fault::{FaultConfig, FaultInjecting};
+use supine_drivers::fault::{FaultySource, SourceFaultConfig};
 use supine_drivers::oni::{Codec, OniReader, OniWriter};
 use supine_drivers::recording::Recording;
-use supine_drivers::source::{self, DepthSource, ErrorKind, SourceSpec};
+use supine_drivers::source::{self, DepthSource, SourceErrorKind, SourceSpec};
 
 fn frames(n: usize) -> Vec<Vec<u16>> {
     (0..n)
@@ -36,11 +36,11 @@ fn file_spec_replays_through_recording_and_fault_injection() {
         src.describe()
     );
     let rec = Recording::create(src, &copy, Codec::Z16Table).unwrap();
-    let mut faulty = FaultInjecting::new(
+    let mut faulty = FaultySource::new(
         rec,
-        FaultConfig {
+        SourceFaultConfig {
             disconnect_after: Some(4),
-            ..FaultConfig::none(9)
+            ..SourceFaultConfig::none(9)
         },
     );
     for (t, px) in want.iter().take(4).enumerate() {
@@ -50,7 +50,7 @@ fn file_spec_replays_through_recording_and_fault_injection() {
     }
     assert_eq!(
         faulty.next_frame(Duration::ZERO).unwrap_err().kind(),
-        ErrorKind::Disconnected
+        SourceErrorKind::Disconnected
     );
     let rec = faulty.into_inner();
     assert_eq!(rec.frames_recorded(), 4);
@@ -60,6 +60,6 @@ fn file_spec_replays_through_recording_and_fault_injection() {
     for px in want.iter().take(4) {
         assert!(r.read_frame().unwrap().depth_mm() == &px[..]);
     }
-    assert_eq!(r.read_frame().unwrap_err().kind(), ErrorKind::EndOfStream);
+    assert_eq!(r.read_frame().unwrap_err().kind(), SourceErrorKind::EndOfStream);
     std::fs::remove_dir_all(&dir).unwrap();
 }

@@ -17,11 +17,11 @@ use std::time::Duration;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::{DepthFrame, HEIGHT, PIXELS, WIDTH};
 
-use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::source::{DepthSource, SourceError, SourceErrorKind};
 
 /// The number of Kinects libfreenect sees.
 pub fn device_count() -> Result<usize, SourceError> {
-    sys::device_count().map_err(|e| SourceError::new(ErrorKind::Io, e))
+    sys::device_count().map_err(|e| SourceError::new(SourceErrorKind::Io, e))
 }
 
 /// A live Kinect through libfreenect.
@@ -41,18 +41,18 @@ impl std::fmt::Debug for FreenectSource {
 }
 
 impl FreenectSource {
-    /// Open Kinect `index` (0 = first); [`ErrorKind::NoDevice`] when there is no such Kinect.
+    /// Open Kinect `index` (0 = first); [`SourceErrorKind::NoDevice`] when there is no such Kinect.
     pub fn open(index: u32) -> Result<Self, SourceError> {
         let kinect = sys::Kinect::open(index).map_err(|e| match e {
             sys::OpenError::NoDevice(0) => SourceError::new(
-                ErrorKind::NoDevice,
+                SourceErrorKind::NoDevice,
                 "no Kinect found by libfreenect (is it plugged in and powered, and may this user access it via udev?)",
             ),
             sys::OpenError::NoDevice(n) => SourceError::new(
-                ErrorKind::NoDevice,
+                SourceErrorKind::NoDevice,
                 format!("no Kinect at freenect index {index}: libfreenect sees {n} device(s)"),
             ),
-            sys::OpenError::Failed(msg) => SourceError::new(ErrorKind::Io, format!("freenect:{index}: {msg}")),
+            sys::OpenError::Failed(msg) => SourceError::new(SourceErrorKind::Io, format!("freenect:{index}: {msg}")),
         })?;
         Ok(FreenectSource {
             kinect,
@@ -67,20 +67,20 @@ impl DepthSource for FreenectSource {
     fn next_frame(&mut self, timeout: Duration) -> Result<DepthFrame<'_>, SourceError> {
         if self.failed {
             return Err(SourceError::new(
-                ErrorKind::Disconnected,
+                SourceErrorKind::Disconnected,
                 "the Kinect event loop stopped",
             ));
         }
         match self.kinect.wait_frame(&mut self.front, timeout) {
             sys::Wait::Frame(capture_us, sequence) => {
                 DepthFrame::new(&self.front, WIDTH as u16, HEIGHT as u16, capture_us, sequence)
-                    .map_err(|e| SourceError::new(ErrorKind::Other, e.to_string()))
+                    .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
             }
             sys::Wait::Timeout => Err(SourceError::timeout()),
             sys::Wait::Failed(msg) => {
                 self.failed = true;
                 Err(SourceError::new(
-                    ErrorKind::Disconnected,
+                    SourceErrorKind::Disconnected,
                     format!("freenect:{}: {msg}", self.index),
                 ))
             }
@@ -111,9 +111,9 @@ mod tests {
             "this test expects a machine without a Kinect"
         );
         let e = FreenectSource::open(0).unwrap_err();
-        assert_eq!(e.kind(), ErrorKind::NoDevice);
+        assert_eq!(e.kind(), SourceErrorKind::NoDevice);
         assert!(e.to_string().contains("no Kinect found"), "{e}");
         let e = FreenectSource::open(3).unwrap_err();
-        assert_eq!(e.kind(), ErrorKind::NoDevice);
+        assert_eq!(e.kind(), SourceErrorKind::NoDevice);
     }
 }

@@ -1,4 +1,4 @@
-//! The link error type: a small, stable [`ErrorKind`] for callers to match on, a static description of what failed,
+//! The link error type: a small, stable [`LinkErrorKind`] for callers to match on, a static description of what failed,
 //! and the OS error underneath when there is one. Building one allocates nothing (the description is `&'static str`
 //! or, only on the open path, a `String`).
 
@@ -6,11 +6,11 @@ use std::borrow::Cow;
 use std::fmt;
 use std::io;
 
-/// What kind of failure a link reports, in the manner of `embedded_can::ErrorKind`: callers match on this, not on
+/// What kind of failure a link reports, in the manner of `embedded_can::LinkErrorKind`: callers match on this, not on
 /// messages.
 #[non_exhaustive]
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum ErrorKind {
+pub enum LinkErrorKind {
     /// The device, path or interface does not exist, or this kernel lacks the protocol family (no SocketCAN).
     NotFound,
     /// The device exists but we may not open it (permissions, busy).
@@ -33,20 +33,20 @@ pub enum ErrorKind {
     Encode,
 }
 
-impl ErrorKind {
+impl LinkErrorKind {
     /// A short, stable, lower-case name for counters and JSON.
     pub fn as_str(self) -> &'static str {
         match self {
-            ErrorKind::NotFound => "not_found",
-            ErrorKind::PermissionDenied => "permission_denied",
-            ErrorKind::Disconnected => "disconnected",
-            ErrorKind::Io => "io",
-            ErrorKind::BusOff => "bus_off",
-            ErrorKind::Corrupt => "corrupt",
-            ErrorKind::Unsupported => "unsupported",
-            ErrorKind::InvalidSpec => "invalid_spec",
-            ErrorKind::Timeout => "timeout",
-            ErrorKind::Encode => "encode",
+            LinkErrorKind::NotFound => "not_found",
+            LinkErrorKind::PermissionDenied => "permission_denied",
+            LinkErrorKind::Disconnected => "disconnected",
+            LinkErrorKind::Io => "io",
+            LinkErrorKind::BusOff => "bus_off",
+            LinkErrorKind::Corrupt => "corrupt",
+            LinkErrorKind::Unsupported => "unsupported",
+            LinkErrorKind::InvalidSpec => "invalid_spec",
+            LinkErrorKind::Timeout => "timeout",
+            LinkErrorKind::Encode => "encode",
         }
     }
 }
@@ -54,20 +54,20 @@ impl ErrorKind {
 /// Implemented by every link error, like `embedded_can::Error`: the kind is what callers dispatch on.
 pub trait Error: fmt::Debug + fmt::Display {
     /// The kind of this error.
-    fn kind(&self) -> ErrorKind;
+    fn kind(&self) -> LinkErrorKind;
 }
 
 /// A link failure: kind, what was being done, and the OS error if any.
 #[derive(Debug)]
 pub struct LinkError {
-    kind: ErrorKind,
+    kind: LinkErrorKind,
     what: Cow<'static, str>,
     source: Option<io::Error>,
 }
 
 impl LinkError {
     /// An error of `kind` described by `what` (e.g. "opening /dev/ttyUSB0").
-    pub fn new(kind: ErrorKind, what: impl Into<Cow<'static, str>>) -> Self {
+    pub fn new(kind: LinkErrorKind, what: impl Into<Cow<'static, str>>) -> Self {
         LinkError {
             kind,
             what: what.into(),
@@ -91,7 +91,7 @@ impl LinkError {
 }
 
 impl Error for LinkError {
-    fn kind(&self) -> ErrorKind {
+    fn kind(&self) -> LinkErrorKind {
         self.kind
     }
 }
@@ -112,21 +112,21 @@ impl std::error::Error for LinkError {
 }
 
 /// Map an OS error to a link error kind (errno values from `asm-generic/errno-base.h` and `errno.h`).
-pub fn kind_of_io(err: &io::Error) -> ErrorKind {
+pub fn kind_of_io(err: &io::Error) -> LinkErrorKind {
     match err.raw_os_error() {
         Some(libc::ENOENT) | Some(libc::ENODEV) | Some(libc::EAFNOSUPPORT) | Some(libc::EPROTONOSUPPORT) => {
-            ErrorKind::NotFound
+            LinkErrorKind::NotFound
         }
-        Some(libc::EACCES) | Some(libc::EPERM) | Some(libc::EBUSY) => ErrorKind::PermissionDenied,
+        Some(libc::EACCES) | Some(libc::EPERM) | Some(libc::EBUSY) => LinkErrorKind::PermissionDenied,
         Some(libc::EIO) | Some(libc::ENXIO) | Some(libc::EPIPE) | Some(libc::ENETDOWN)
-        | Some(libc::EBADF) => ErrorKind::Disconnected,
-        Some(libc::ETIMEDOUT) => ErrorKind::Timeout,
+        | Some(libc::EBADF) => LinkErrorKind::Disconnected,
+        Some(libc::ETIMEDOUT) => LinkErrorKind::Timeout,
         _ => match err.kind() {
-            io::ErrorKind::NotFound => ErrorKind::NotFound,
-            io::ErrorKind::PermissionDenied => ErrorKind::PermissionDenied,
-            io::ErrorKind::TimedOut => ErrorKind::Timeout,
-            io::ErrorKind::UnexpectedEof | io::ErrorKind::BrokenPipe => ErrorKind::Disconnected,
-            _ => ErrorKind::Io,
+            io::ErrorKind::NotFound => LinkErrorKind::NotFound,
+            io::ErrorKind::PermissionDenied => LinkErrorKind::PermissionDenied,
+            io::ErrorKind::TimedOut => LinkErrorKind::Timeout,
+            io::ErrorKind::UnexpectedEof | io::ErrorKind::BrokenPipe => LinkErrorKind::Disconnected,
+            _ => LinkErrorKind::Io,
         },
     }
 }
@@ -139,23 +139,23 @@ mod tests {
     fn errno_maps_to_kind() {
         assert_eq!(
             kind_of_io(&io::Error::from_raw_os_error(libc::EAFNOSUPPORT)),
-            ErrorKind::NotFound
+            LinkErrorKind::NotFound
         );
         assert_eq!(
             kind_of_io(&io::Error::from_raw_os_error(libc::ENOENT)),
-            ErrorKind::NotFound
+            LinkErrorKind::NotFound
         );
         assert_eq!(
             kind_of_io(&io::Error::from_raw_os_error(libc::EIO)),
-            ErrorKind::Disconnected
+            LinkErrorKind::Disconnected
         );
         assert_eq!(
             kind_of_io(&io::Error::from_raw_os_error(libc::EACCES)),
-            ErrorKind::PermissionDenied
+            LinkErrorKind::PermissionDenied
         );
         assert_eq!(
             kind_of_io(&io::Error::from_raw_os_error(libc::EINVAL)),
-            ErrorKind::Io
+            LinkErrorKind::Io
         );
     }
 
@@ -164,6 +164,6 @@ mod tests {
         let e = LinkError::io("opening /dev/ttyX", io::Error::from_raw_os_error(libc::ENOENT));
         let text = e.to_string();
         assert!(text.starts_with("opening /dev/ttyX: "), "{text}");
-        assert_eq!(e.kind(), ErrorKind::NotFound);
+        assert_eq!(e.kind(), LinkErrorKind::NotFound);
     }
 }

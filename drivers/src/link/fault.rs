@@ -1,4 +1,4 @@
-//! [`FaultInjecting`]: a link middleware, in the manner of smoltcp's `FaultInjector`, that drops messages,
+//! [`FaultyLink`]: a link middleware, in the manner of smoltcp's `FaultInjector`, that drops messages,
 //! damages their encoded bytes (a flipped byte in a serial frame, a changed data digit in an SLCAN line, a flipped
 //! data byte in a `struct can_frame`), stalls the writer and reader, and disconnects the device underneath, all
 //! from a seeded generator so that a failing run can be replayed.
@@ -17,7 +17,7 @@ use crate::splitmix::SplitMix64;
 
 /// What to inject, with probabilities in 0..=1.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct FaultConfig {
+pub struct LinkFaultConfig {
     /// Generator seed.
     pub seed: u64,
     /// Probability that a sent message is dropped before it reaches the link.
@@ -51,9 +51,9 @@ pub struct FaultCounters {
 
 /// A link wrapped with seeded faults; implements [`Link`] itself.
 #[derive(Debug)]
-pub struct FaultInjecting<L> {
+pub struct FaultyLink<L> {
     inner: L,
-    config: FaultConfig,
+    config: LinkFaultConfig,
     rng: SplitMix64,
     stall_left: u32,
     sends: u64,
@@ -61,11 +61,11 @@ pub struct FaultInjecting<L> {
     faults: FaultCounters,
 }
 
-impl<L: Link> FaultInjecting<L> {
+impl<L: Link> FaultyLink<L> {
     /// Wrap `inner` with the faults of `config`.
-    pub fn new(inner: L, config: FaultConfig) -> Self {
+    pub fn new(inner: L, config: LinkFaultConfig) -> Self {
         let rng = SplitMix64(config.seed);
-        FaultInjecting {
+        FaultyLink {
             inner,
             config,
             rng,
@@ -208,7 +208,7 @@ fn slcan_data_spans(bytes: &[u8], mut want: Option<(usize, &mut (usize, usize))>
     count
 }
 
-impl<L: Link> Link for FaultInjecting<L> {
+impl<L: Link> Link for FaultyLink<L> {
     fn enqueue(&mut self, msg: &Message, tamper: Option<Tamper<'_>>) -> Result<(), LinkError> {
         let index = self.sends;
         self.sends += 1;

@@ -9,7 +9,7 @@ use std::io::{self, Read, Write};
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use super::error::{ErrorKind, LinkError, kind_of_io};
+use super::error::{LinkError, LinkErrorKind, kind_of_io};
 use super::port::{LinkState, Port, PortCounters};
 
 /// Whether a `file:` link writes a new capture or reads an existing one.
@@ -29,7 +29,7 @@ pub struct FilePort {
     file: Option<File>,
     mode: FileMode,
     counters: PortCounters,
-    last_error: Option<ErrorKind>,
+    last_error: Option<LinkErrorKind>,
     fresh: bool,
 }
 
@@ -140,7 +140,7 @@ impl Port for FilePort {
         self.counters
     }
 
-    fn last_error(&self) -> Option<ErrorKind> {
+    fn last_error(&self) -> Option<LinkErrorKind> {
         self.last_error
     }
 
@@ -153,7 +153,7 @@ impl Port for FilePort {
 #[derive(Debug, Default)]
 pub struct StdoutPort {
     counters: PortCounters,
-    last_error: Option<ErrorKind>,
+    last_error: Option<LinkErrorKind>,
     closed: bool,
     fresh: bool,
 }
@@ -224,7 +224,7 @@ impl Port for StdoutPort {
         self.counters
     }
 
-    fn last_error(&self) -> Option<ErrorKind> {
+    fn last_error(&self) -> Option<LinkErrorKind> {
         self.last_error
     }
 

@@ -47,8 +47,8 @@ use supine_core::wire::Message;
 
 pub use backoff::{Backoff, INITIAL_DELAY as RECONNECT_INITIAL_DELAY, MAX_DELAY as RECONNECT_MAX_DELAY};
 pub use codec::{Codec, Decoded, Framing, RxError, RxErrorCounts};
-pub use error::{Error, ErrorKind, LinkError, kind_of_io};
-pub use fault::{FaultConfig, FaultCounters, FaultInjecting};
+pub use error::{Error, LinkError, LinkErrorKind, kind_of_io};
+pub use fault::{FaultCounters, FaultyLink, LinkFaultConfig};
 pub use file::FileMode;
 pub use port::{LinkState, Port, PortCounters};
 pub use queue::TxQueue;
@@ -93,7 +93,7 @@ pub struct LinkCounters {
     pub io_errors: u64,
     /// CAN bus-off reports.
     pub bus_off: u64,
-    /// Faults injected by a [`FaultInjecting`] wrapper (zero otherwise).
+    /// Faults injected by a [`FaultyLink`] wrapper (zero otherwise).
     pub faults: FaultCounters,
 }
 
@@ -116,7 +116,7 @@ pub trait Link {
     fn enqueue(&mut self, msg: &Message, tamper: Option<Tamper<'_>>) -> Result<(), LinkError>;
 
     /// Queue `msg` and write what the device takes now. Never blocks. Fails only if the message cannot be
-    /// encoded (kind [`ErrorKind::Encode`]) or the link was closed.
+    /// encoded (kind [`LinkErrorKind::Encode`]) or the link was closed.
     fn send(&mut self, msg: &Message) -> Result<(), LinkError> {
         self.enqueue(msg, None)?;
         self.poll();
@@ -128,7 +128,7 @@ pub trait Link {
 
     /// The next decoded incoming message, or `None` if none is complete now. Never blocks; damaged input is
     /// counted in [`LinkCounters::rx_errors`], never returned as an error. Fails only on a send-only link
-    /// ([`ErrorKind::Unsupported`]).
+    /// ([`LinkErrorKind::Unsupported`]).
     fn receive(&mut self) -> Result<Option<Message>, LinkError>;
 
     /// Block up to `timeout` until input may be available (for idle loops such as `supine wire listen`; never
@@ -146,7 +146,7 @@ pub trait Link {
 
     /// Flush the queue for up to `timeout`, send the framing's close sequence (SLCAN `C\r`), and release the
     /// device. Messages still queued at the deadline are counted as dropped and the result is
-    /// [`ErrorKind::Timeout`]. Blocks; call it once at shutdown.
+    /// [`LinkErrorKind::Timeout`]. Blocks; call it once at shutdown.
     fn close(&mut self, timeout: Duration) -> Result<(), LinkError>;
 
     /// The framing of this link's bytes.
@@ -297,7 +297,10 @@ impl<P: Port, C: Codec> PacketLink<P, C> {
 impl<P: Port, C: Codec> Link for PacketLink<P, C> {
     fn enqueue(&mut self, msg: &Message, tamper: Option<Tamper<'_>>) -> Result<(), LinkError> {
         if self.closed {
-            return Err(LinkError::new(ErrorKind::Disconnected, "send on a closed link"));
+            return Err(LinkError::new(
+                LinkErrorKind::Disconnected,
+                "send on a closed link",
+            ));
         }
         let framing = self.codec.framing();
         let codec = &mut self.codec;
@@ -329,7 +332,7 @@ impl<P: Port, C: Codec> Link for PacketLink<P, C> {
 
     fn receive(&mut self) -> Result<Option<Message>, LinkError> {
         if !self.receives {
-            return Err(LinkError::new(ErrorKind::Unsupported, "this link only sends"));
+            return Err(LinkError::new(LinkErrorKind::Unsupported, "this link only sends"));
         }
         self.service();
         if self.closed {
@@ -426,7 +429,7 @@ impl<P: Port, C: Codec> Link for PacketLink<P, C> {
                 let left = self.queue.clear();
                 self.counters.dropped += left as u64;
                 result = Err(LinkError::new(
-                    ErrorKind::Timeout,
+                    LinkErrorKind::Timeout,
                     "closing link: queue not flushed before the deadline",
                 ));
                 break;
@@ -489,7 +492,7 @@ impl Default for LinkOptions {
 }
 
 /// Open the link a spec names. Errors name the spec and the failing step; a kernel without SocketCAN gives
-/// [`ErrorKind::NotFound`] with that said in words.
+/// [`LinkErrorKind::NotFound`] with that said in words.
 pub fn open(spec: &LinkSpec, options: &LinkOptions) -> Result<Box<dyn Link + Send>, LinkError> {
     let name = spec.to_string();
     let cap = options.queue_capacity;

@@ -6,7 +6,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::error::ErrorKind;
+use super::error::LinkErrorKind;
 
 /// Where a port (and so a link) stands.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -73,7 +73,7 @@ pub trait Port {
         1
     }
     /// The last error kind that took the port down, if any.
-    fn last_error(&self) -> Option<ErrorKind>;
+    fn last_error(&self) -> Option<LinkErrorKind>;
     /// Close for good: release the device. Later reads and writes return 0 and the state is `Ended`.
     fn shutdown(&mut self);
 }

@@ -5,7 +5,7 @@ use std::fmt;
 use std::path::PathBuf;
 use std::str::FromStr;
 
-use super::error::{ErrorKind, LinkError};
+use super::error::{LinkError, LinkErrorKind};
 
 /// Baud rate of `serial:` and `slcan:` when the spec gives none.
 pub const DEFAULT_BAUD: u32 = 115_200;
@@ -77,7 +77,7 @@ impl fmt::Display for LinkSpec {
 const EXPECTED: &str = "expected stdout, serial:PATH[@BAUD], slcan:PATH[@BAUD], can:IFACE or file:PATH";
 
 fn bad(msg: String) -> LinkError {
-    LinkError::new(ErrorKind::InvalidSpec, msg)
+    LinkError::new(LinkErrorKind::InvalidSpec, msg)
 }
 
 fn parse_port(kind: &str, rest: &str, whole: &str) -> Result<(PathBuf, u32), LinkError> {
@@ -232,7 +232,7 @@ mod tests {
         ];
         for (input, needle) in cases {
             let err = parse(input).unwrap_err();
-            assert_eq!(err.kind(), ErrorKind::InvalidSpec, "{input}");
+            assert_eq!(err.kind(), LinkErrorKind::InvalidSpec, "{input}");
             let text = err.to_string();
             assert!(text.contains(needle), "{input}: {text}");
             assert!(

@@ -39,7 +39,7 @@
 //! The reader accepts what the writer and OpenNI's Recorder write: the first depth node, codecs `NONE`/`16zP`/`16zT`,
 //! pixel formats DEPTH_1_MM and DEPTH_100_UM (converted to mm). It stops at END (real recordings carry junk after it),
 //! skips records of other nodes and unknown record types, and reports truncated or corrupt files as
-//! [`ErrorKind::CorruptData`](crate::source::ErrorKind) naming the offset, after delivering every intact frame.
+//! [`SourceErrorKind::CorruptData`](crate::source::SourceErrorKind) naming the offset, after delivering every intact frame.
 //! Length fields are checked against fixed limits before anything is read, so a corrupt file can never make it
 //! allocate more than the buffers sized at open.
 //!

@@ -13,7 +13,7 @@ use super::{
     Codec, FILE_HEADER_LEN, FILE_MAGIC, MAX_FIELDS, MAX_PAYLOAD, NODE_TYPE_DEPTH, PIXEL_FORMAT_DEPTH_1_MM,
     PIXEL_FORMAT_DEPTH_100_UM, RECORD_HEADER_LEN, RECORD_MAGIC, record_type as rt,
 };
-use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::source::{DepthSource, SourceError, SourceErrorKind};
 
 /// What an .oni file says about its depth stream.
 #[derive(Debug, Clone, PartialEq)]
@@ -104,7 +104,7 @@ impl<R: Read + Seek> OniReader<R> {
         read_exact_or(&mut input, &mut header, 0, "the file header")?;
         if header[0..4] != FILE_MAGIC {
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!(
                     "not an .oni file: magic {:02x?}, expected \"NI10\"",
                     &header[0..4]
@@ -119,7 +119,7 @@ impl<R: Read + Seek> OniReader<R> {
         );
         if (version.0, version.1, version.2) != (1, 0, 1) {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!(
                     ".oni file version {}.{}.{}.{} is not supported (only 1.0.1.x, what OpenNI2 writes)",
                     version.0, version.1, version.2, version.3
@@ -189,7 +189,7 @@ impl<R: Read + Seek> OniReader<R> {
                     if node_type == NODE_TYPE_DEPTH {
                         let codec = Codec::from_fourcc(fourcc).ok_or_else(|| {
                             SourceError::new(
-                                ErrorKind::Unsupported,
+                                SourceErrorKind::Unsupported,
                                 format!(
                                     "depth codec {:?} is not supported (NONE, 16zP, 16zT are)",
                                     String::from_utf8_lossy(&fourcc)
@@ -250,14 +250,14 @@ impl<R: Read + Seek> OniReader<R> {
         }
         if p.cropping_enabled {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 "cropped .oni depth streams are not supported",
             ));
         }
         let pixel_format = p.pixel_format.unwrap_or(PIXEL_FORMAT_DEPTH_1_MM);
         if pixel_format != PIXEL_FORMAT_DEPTH_1_MM && pixel_format != PIXEL_FORMAT_DEPTH_100_UM {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!("depth pixel format {pixel_format} is not supported (100 = 1 mm, 101 = 100 µm are)"),
             ));
         }
@@ -342,7 +342,7 @@ impl<R: Read + Seek> OniReader<R> {
                             != (self.info.width as u32, self.info.height as u32)
                     {
                         return Err(SourceError::new(
-                            ErrorKind::Unsupported,
+                            SourceErrorKind::Unsupported,
                             format!("{}: the depth resolution changes mid-stream", self.name),
                         ));
                     }
@@ -421,7 +421,7 @@ impl<R: Read + Seek> OniReader<R> {
 
     fn corrupt(&self, at: u64, what: &str) -> SourceError {
         SourceError::new(
-            ErrorKind::CorruptData,
+            SourceErrorKind::CorruptData,
             format!("{}: record at offset {at}: {what}", self.name),
         )
     }
@@ -440,7 +440,7 @@ impl<R: Read + Seek> OniReader<R> {
             }
         };
         DepthFrame::new(&self.depth, self.info.width, self.info.height, ts, id)
-            .map_err(|e| SourceError::new(ErrorKind::Other, format!("{}: {e}", self.name)))
+            .map_err(|e| SourceError::new(SourceErrorKind::Other, format!("{}: {e}", self.name)))
     }
 }
 
@@ -474,7 +474,7 @@ fn read_exact_or(input: &mut impl Read, buf: &mut [u8], start: u64, what: &str) 
     input.read_exact(buf).map_err(|e| {
         if e.kind() == IoKind::UnexpectedEof {
             SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!("file truncated in {what} (record at offset {start})"),
             )
         } else {

@@ -5,7 +5,7 @@ use std::io::Cursor;
 use supine_core::camera::Intrinsics;
 
 use super::*;
-use crate::source::{DepthSource, ErrorKind};
+use crate::source::{DepthSource, SourceErrorKind};
 
 fn config(w: u16, h: u16, codec: Codec) -> OniWriterConfig {
     let k = Intrinsics::from_fov(w, h, 1.0, 0.8);
@@ -62,7 +62,7 @@ fn round_trip_every_codec() {
         let (hf, vf) = r.info().fov_rad.unwrap();
         assert!((hf - 1.0).abs() < 1e-6 && (vf - 0.8).abs() < 1e-6);
         let (got, end) = read_all(&bytes);
-        assert_eq!(end.kind(), ErrorKind::EndOfStream, "{codec}: {end}");
+        assert_eq!(end.kind(), SourceErrorKind::EndOfStream, "{codec}: {end}");
         assert_eq!(got.len(), frames.len(), "{codec}");
         for (i, ((px, ts, id), (want, want_ts))) in got.iter().zip(&frames).enumerate() {
             assert_eq!(px, want, "{codec} frame {i} pixels");
@@ -155,7 +155,7 @@ fn trailing_junk_after_end_is_ignored() {
     bytes.extend_from_slice(&[0xAB; 1000]);
     let (got, end) = read_all(&bytes);
     assert_eq!(got.len(), 1);
-    assert_eq!(end.kind(), ErrorKind::EndOfStream);
+    assert_eq!(end.kind(), SourceErrorKind::EndOfStream);
 }
 
 #[test]
@@ -171,15 +171,15 @@ fn truncated_files_deliver_whole_frames_then_say_truncated() {
         for (i, g) in got.iter().enumerate() {
             assert_eq!(g.0, frames[i].0);
         }
-        assert_eq!(end.kind(), ErrorKind::CorruptData, "cut at {cut}: {end}");
+        assert_eq!(end.kind(), SourceErrorKind::CorruptData, "cut at {cut}: {end}");
         assert!(end.to_string().contains("truncated"), "cut at {cut}: {end}");
     }
     // Damage after NODE_REMOVED does not matter: the stream has ended by then.
     let (got, end) = read_all(&bytes[..bytes.len() - 1]);
-    assert_eq!((got.len(), end.kind()), (3, ErrorKind::EndOfStream));
+    assert_eq!((got.len(), end.kind()), (3, SourceErrorKind::EndOfStream));
     // Cut inside the description: open fails clearly.
     let e = OniReader::new(Cursor::new(&bytes[..150]), "cut.oni").unwrap_err();
-    assert_eq!(e.kind(), ErrorKind::CorruptData);
+    assert_eq!(e.kind(), SourceErrorKind::CorruptData);
     assert!(e.to_string().contains("truncated"), "{e}");
     let e = OniReader::new(Cursor::new(&bytes[..10]), "cut.oni").unwrap_err();
     assert!(e.to_string().contains("file header"), "{e}");
@@ -198,12 +198,12 @@ fn corrupt_files_give_clear_errors() {
     let mut old = good.clone();
     old[6] = 0; // version 1.0.0.0
     let e = OniReader::new(Cursor::new(old), "v").unwrap_err();
-    assert_eq!(e.kind(), ErrorKind::Unsupported);
+    assert_eq!(e.kind(), SourceErrorKind::Unsupported);
 
     let mut codec = good.clone();
     codec[24 + 28 + 10 + 4..24 + 28 + 10 + 8].copy_from_slice(b"JPEG");
     let e = OniReader::new(Cursor::new(codec), "c").unwrap_err();
-    assert_eq!(e.kind(), ErrorKind::Unsupported);
+    assert_eq!(e.kind(), SourceErrorKind::Unsupported);
     assert!(e.to_string().contains("JPEG"), "{e}");
 
     // A huge payload length in the first NEW_DATA (at 467) must not allocate or read it.
@@ -231,7 +231,7 @@ fn corrupt_files_give_clear_errors() {
     let p = 467 + 40;
     payload[p..p + 2].copy_from_slice(&1u16.to_le_bytes()); // K = 1
     let (_, e) = read_all(&payload);
-    assert_eq!(e.kind(), ErrorKind::CorruptData);
+    assert_eq!(e.kind(), SourceErrorKind::CorruptData);
     assert!(e.to_string().contains("16zT"), "{e}");
 }
 
@@ -240,7 +240,7 @@ fn writer_rejects_bad_frames() {
     let mut w = OniWriter::new(Cursor::new(Vec::new()), config(4, 2, Codec::Z16Table)).unwrap();
     assert_eq!(
         w.write_frame(&[0; 7], 0).unwrap_err().kind(),
-        ErrorKind::InvalidArgument
+        SourceErrorKind::InvalidArgument
     );
     w.write_frame(&[1; 8], 10).unwrap();
     assert!(
@@ -286,7 +286,7 @@ fn dropped_writer_finishes_the_file() {
     assert!(r.next_frame(std::time::Duration::ZERO).is_ok());
     assert_eq!(
         r.next_frame(std::time::Duration::ZERO).unwrap_err().kind(),
-        ErrorKind::EndOfStream
+        SourceErrorKind::EndOfStream
     );
     std::fs::remove_dir_all(&dir).unwrap();
 }
@@ -320,5 +320,5 @@ fn other_nodes_are_skipped() {
     let (got, end) = read_all(&patched);
     assert_eq!(got.len(), 1);
     assert_eq!(got[0].0, [5, 6, 7, 8]);
-    assert_eq!(end.kind(), ErrorKind::EndOfStream);
+    assert_eq!(end.kind(), SourceErrorKind::EndOfStream);
 }

@@ -12,7 +12,7 @@ use super::{
     Codec, FILE_HEADER_LEN, FILE_MAGIC, FILE_VERSION, MAX_PAYLOAD, NODE_TYPE_DEPTH, PIXEL_FORMAT_DEPTH_1_MM,
     RECORD_HEADER_LEN, RECORD_MAGIC, record_type as rt,
 };
-use crate::source::{ErrorKind, SourceError};
+use crate::source::{SourceError, SourceErrorKind};
 
 /// The node id of the depth stream (the Recorder numbers streams from 1).
 const NODE_ID: u32 = 1;
@@ -57,7 +57,7 @@ impl OniWriterConfig {
     }
 
     fn validate(&self) -> Result<(), SourceError> {
-        let bad = |m: String| Err(SourceError::new(ErrorKind::InvalidArgument, m));
+        let bad = |m: String| Err(SourceError::new(SourceErrorKind::InvalidArgument, m));
         if self.width == 0 || self.height == 0 || self.pixels() * 2 > MAX_PAYLOAD {
             return bad(format!(
                 "cannot record {}x{} frames (at most 1600x1200)",
@@ -171,7 +171,7 @@ impl<W: Write + Seek> OniWriter<W> {
     pub fn write_frame(&mut self, depth_mm: &[u16], timestamp_us: u64) -> Result<(), SourceError> {
         if depth_mm.len() != self.config.pixels() {
             return Err(SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 format!(
                     "frame has {} pixels, the recording is {}x{}",
                     depth_mm.len(),
@@ -184,13 +184,13 @@ impl<W: Write + Seek> OniWriter<W> {
             && timestamp_us < last
         {
             return Err(SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 format!("timestamp {timestamp_us} µs is before the previous frame's {last} µs"),
             ));
         }
         if self.frames == u32::MAX - 1 {
             return Err(SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 "too many frames for one .oni file",
             ));
         }
@@ -203,12 +203,17 @@ impl<W: Write + Seek> OniWriter<W> {
             Codec::Z16 => encode_16z(depth_mm, &mut self.payload),
             Codec::Z16Table => match self.table.as_mut() {
                 Some(t) => t.encode(depth_mm, &mut self.payload),
-                None => return Err(SourceError::new(ErrorKind::Other, "16zT writer lost its table")),
+                None => {
+                    return Err(SourceError::new(
+                        SourceErrorKind::Other,
+                        "16zT writer lost its table",
+                    ));
+                }
             },
         };
         encoded.map_err(|e| {
             SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 format!("frame {}: {e}", self.frames + 1),
             )
         })?;
@@ -233,7 +238,7 @@ impl<W: Write + Seek> OniWriter<W> {
     pub fn write(&mut self, frame: &DepthFrame<'_>) -> Result<(), SourceError> {
         if (frame.width(), frame.height()) != (self.config.width, self.config.height) {
             return Err(SourceError::new(
-                ErrorKind::InvalidArgument,
+                SourceErrorKind::InvalidArgument,
                 format!(
                     "frame is {}x{}, the recording is {}x{}",
                     frame.width(),
@@ -251,7 +256,7 @@ impl<W: Write + Seek> OniWriter<W> {
         self.finish_in_place()?;
         self.out
             .take()
-            .ok_or_else(|| SourceError::new(ErrorKind::Other, "writer already finished"))
+            .ok_or_else(|| SourceError::new(SourceErrorKind::Other, "writer already finished"))
     }
 
     fn finish_in_place(&mut self) -> Result<(), SourceError> {
@@ -294,7 +299,7 @@ impl<W: Write + Seek> OniWriter<W> {
     fn out_mut(&mut self) -> Result<&mut W, SourceError> {
         self.out
             .as_mut()
-            .ok_or_else(|| SourceError::new(ErrorKind::Other, "writer already finished"))
+            .ok_or_else(|| SourceError::new(SourceErrorKind::Other, "writer already finished"))
     }
 
     fn file_header(&self, max_ts: u64) -> [u8; FILE_HEADER_LEN] {

@@ -23,17 +23,17 @@ use supine_core::depth::DepthFrame;
 pub use sys::DeviceInfo;
 use sys::{Context, Device, OniError, OniVideoMode, Recorder, Stream};
 
-use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::source::{DepthSource, SourceError, SourceErrorKind};
 
 /// How long an .oni playback may take to produce the next frame before it counts as the end of the file.
 pub const FILE_EOF_WAIT: Duration = Duration::from_millis(2000);
 
 fn to_source_error(e: OniError, context: &str) -> SourceError {
     let kind = match e.status {
-        sys::STATUS_NO_DEVICE => ErrorKind::NoDevice,
-        sys::STATUS_TIME_OUT => ErrorKind::Timeout,
-        sys::STATUS_NOT_SUPPORTED => ErrorKind::Unsupported,
-        _ => ErrorKind::Other,
+        sys::STATUS_NO_DEVICE => SourceErrorKind::NoDevice,
+        sys::STATUS_TIME_OUT => SourceErrorKind::Timeout,
+        sys::STATUS_NOT_SUPPORTED => SourceErrorKind::Unsupported,
+        _ => SourceErrorKind::Other,
     };
     SourceError::new(kind, format!("{context}: {e}"))
 }
@@ -73,7 +73,7 @@ impl std::fmt::Debug for OpenNi2Source {
 
 impl OpenNi2Source {
     /// Open `uri` (a device URI or an .oni path); `None` opens the first device and fails with
-    /// [`ErrorKind::NoDevice`] if there is none.
+    /// [`SourceErrorKind::NoDevice`] if there is none.
     pub fn open(uri: Option<&str>) -> Result<Self, SourceError> {
         let ctx = Context::acquire().map_err(|e| to_source_error(e, "initialising OpenNI2"))?;
         if uri.is_none() {
@@ -82,7 +82,7 @@ impl OpenNi2Source {
                 .map_err(|e| to_source_error(e, "listing OpenNI2 devices"))?;
             if devices.is_empty() {
                 return Err(SourceError::new(
-                    ErrorKind::NoDevice,
+                    SourceErrorKind::NoDevice,
                     "no OpenNI2 device found (is the Kinect plugged in, and libFreenectDriver.so installed in \
                      the OpenNI2 Drivers directory? Debian's OpenNI2 has no Kinect v1 driver)",
                 ));
@@ -122,7 +122,7 @@ impl OpenNi2Source {
                     })
                     .collect();
                 return Err(SourceError::new(
-                    ErrorKind::Unsupported,
+                    SourceErrorKind::Unsupported,
                     format!(
                         "{label}: DEPTH_1_MM 640x480@30 refused ({e}); the device offers {}",
                         modes.join(", ")
@@ -137,7 +137,7 @@ impl OpenNi2Source {
             && mode.pixel_format != sys::PIXEL_FORMAT_DEPTH_100_UM
         {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!(
                     "{label}: depth pixel format {} is not in millimetres",
                     mode.pixel_format
@@ -147,7 +147,7 @@ impl OpenNi2Source {
         let (w, h) = (mode.resolution_x, mode.resolution_y);
         if !(1..=1600).contains(&w) || !(1..=1200).contains(&h) {
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!("{label}: implausible video mode {w}x{h}"),
             ));
         }
@@ -238,7 +238,7 @@ impl DepthSource for OpenNi2Source {
             Ok(false) => return Err(SourceError::timeout()),
             Err(e) => {
                 return Err(SourceError::new(
-                    ErrorKind::Disconnected,
+                    SourceErrorKind::Disconnected,
                     format!("{}: {e}", self.label),
                 ));
             }
@@ -248,11 +248,11 @@ impl DepthSource for OpenNi2Source {
         let frame = self
             .stream
             .read_frame()
-            .map_err(|e| SourceError::new(ErrorKind::Disconnected, format!("{label}: {e}")))?;
+            .map_err(|e| SourceError::new(SourceErrorKind::Disconnected, format!("{label}: {e}")))?;
         let (fw, fh, stride, ts, index, format) = frame.meta();
         if (fw, fh) != (w, h) {
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!("{label}: frame is {fw}x{fh}, the stream mode is {w}x{h}"),
             ));
         }
@@ -261,7 +261,7 @@ impl DepthSource for OpenNi2Source {
         let stride = if stride > 0 { stride as usize } else { row_bytes };
         if stride < row_bytes || data.len() < stride * (h as usize - 1) + row_bytes {
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!(
                     "{label}: frame holds {} bytes, too few for {w}x{h} (stride {stride})",
                     data.len()
@@ -282,7 +282,7 @@ impl DepthSource for OpenNi2Source {
         }
         self.frames_read += 1;
         DepthFrame::new(&self.depth, w as u16, h as u16, ts, index.max(0) as u32)
-            .map_err(|e| SourceError::new(ErrorKind::Other, e.to_string()))
+            .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
     }
 
     fn intrinsics(&self) -> Intrinsics {

@@ -24,7 +24,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::{DepthFrame, HEIGHT, PIXELS, WIDTH};
 
 use crate::kinect_raw::{DisparityCalibration, DisparityTable, Y10B_FRAME_BYTES, unpack_y10b};
-use crate::source::{DepthSource, ErrorKind, SourceError};
+use crate::source::{DepthSource, SourceError, SourceErrorKind};
 
 /// Buffers requested from the driver.
 const BUFFERS: u32 = 4;
@@ -134,13 +134,13 @@ impl V4l2Source {
         let card = sys::c_field(&cap.card);
         if caps & sys::CAP_VIDEO_CAPTURE == 0 || caps & sys::CAP_STREAMING == 0 {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!("{name} ({card}) is not a streaming video capture device"),
             ));
         }
         if !offers_y10b(&fd).map_err(|e| io("VIDIOC_ENUM_FMT", e))? {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!(
                     "{name} ({}, {card}) offers no Y10B depth format: load gspca_kinect with depth_mode=1 \
                      (modprobe -r gspca_kinect; modprobe gspca_kinect depth_mode=1) and re-plug the Kinect",
@@ -155,7 +155,7 @@ impl V4l2Source {
             || (pix.bytesperline != 0 && pix.bytesperline != 800)
         {
             return Err(SourceError::new(
-                ErrorKind::Unsupported,
+                SourceErrorKind::Unsupported,
                 format!(
                     "{name}: driver chose {}x{} format {:#x} ({} bytes/line) instead of 640x480 Y10B",
                     pix.width, pix.height, pix.pixelformat, pix.bytesperline
@@ -165,7 +165,7 @@ impl V4l2Source {
         let count = sys::reqbufs(&fd, BUFFERS).map_err(|e| io("VIDIOC_REQBUFS", e))?;
         if count == 0 {
             return Err(SourceError::new(
-                ErrorKind::Io,
+                SourceErrorKind::Io,
                 format!("{name}: the driver granted no buffers"),
             ));
         }
@@ -191,7 +191,7 @@ impl V4l2Source {
     fn map_err(&self, what: &'static str, e: std::io::Error) -> SourceError {
         match e.raw_os_error() {
             Some(libc::ENODEV) | Some(libc::EIO) | Some(libc::EPIPE) => SourceError::new(
-                ErrorKind::Disconnected,
+                SourceErrorKind::Disconnected,
                 format!("{}: {what}: device went away ({e})", self.path.display()),
             ),
             _ => SourceError::io(format!("{}: {what}", self.path.display()), e),
@@ -218,7 +218,7 @@ impl DepthSource for V4l2Source {
             // Give the buffer back anyway, or each such frame would leak one of the few streaming buffers.
             let _ = sys::qbuf(&self.fd, newest.index);
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 "driver returned an unknown buffer index",
             ));
         };
@@ -226,7 +226,7 @@ impl DepthSource for V4l2Source {
         if used < Y10B_FRAME_BYTES {
             let _ = sys::qbuf(&self.fd, newest.index);
             return Err(SourceError::new(
-                ErrorKind::CorruptData,
+                SourceErrorKind::CorruptData,
                 format!(
                     "{}: short frame ({used} of {Y10B_FRAME_BYTES} bytes)",
                     self.path.display()
@@ -245,7 +245,7 @@ impl DepthSource for V4l2Source {
             capture_us,
             newest.sequence,
         )
-        .map_err(|e| SourceError::new(ErrorKind::Other, e.to_string()))
+        .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
     }
 
     fn intrinsics(&self) -> Intrinsics {
@@ -279,7 +279,7 @@ mod tests {
             DisparityCalibration::NOMINAL_10BIT,
         )
         .unwrap_err();
-        assert_eq!(e.kind(), ErrorKind::NoDevice);
+        assert_eq!(e.kind(), SourceErrorKind::NoDevice);
         assert!(e.to_string().contains("/dev/video-supine-missing"), "{e}");
     }
 

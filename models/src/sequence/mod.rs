@@ -419,7 +419,7 @@ mod tests {
                     assert_eq!(frame.capture_us, lines[frames].time_us);
                     frames += 1;
                 }
-                Err(e) if e.kind() == supine_drivers::ErrorKind::EndOfStream => break,
+                Err(e) if e.kind() == supine_drivers::SourceErrorKind::EndOfStream => break,
                 Err(e) => panic!("reading the recording: {e}"),
             }
         }

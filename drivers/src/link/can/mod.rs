@@ -16,7 +16,7 @@ use supine_core::wire::reassembly::{CanError, CanReassembler};
 use supine_core::wire::slcan::{self, MAX_LINE, SlcanError, SlcanReader};
 
 use crate::link::codec::{Codec, Decoded, Framing, RxError};
-use crate::link::error::{ErrorKind, LinkError};
+use crate::link::error::{LinkError, LinkErrorKind};
 
 /// SLCAN bit-rate commands `S0`..`S8` (Lawicel; python-can's table), bit/s.
 pub const SLCAN_BITRATES: [(u32, u8); 9] = [
@@ -96,7 +96,7 @@ impl CanRx {
 
     fn encode_group(&self, msg: &Message) -> Result<can_map::CanGroup, LinkError> {
         can_map::encode_group(msg, self.base)
-            .map_err(|_| LinkError::new(ErrorKind::Encode, "message does not fit its CAN signals"))
+            .map_err(|_| LinkError::new(LinkErrorKind::Encode, "message does not fit its CAN signals"))
     }
 }
 
@@ -118,7 +118,7 @@ impl SlcanCodec {
     pub fn with_base(bitrate: u32, base: CanBase) -> Result<Self, LinkError> {
         let code = SLCAN_BITRATES.iter().find(|(b, _)| *b == bitrate).map(|(_, c)| *c).ok_or_else(|| {
             LinkError::new(
-                ErrorKind::InvalidSpec,
+                LinkErrorKind::InvalidSpec,
                 format!(
                     "SLCAN bit rate {bitrate} is not one of 10k, 20k, 50k, 100k, 125k, 250k, 500k, 750k, 1M bit/s"
                 ),
@@ -146,7 +146,7 @@ impl Codec for SlcanCodec {
         let mut line = [0u8; MAX_LINE];
         for frame in group.iter() {
             let n = slcan::encode(frame, &mut line).ok_or(LinkError::new(
-                ErrorKind::Encode,
+                LinkErrorKind::Encode,
                 "CAN frame does not fit an SLCAN line",
             ))?;
             out.extend_from_slice(&line[..n]);
@@ -260,7 +260,7 @@ impl Codec for SocketCanCodec {
         let group = self.rx.encode_group(msg)?;
         for frame in group.iter() {
             let raw = frame_to_raw(frame).ok_or(LinkError::new(
-                ErrorKind::Encode,
+                LinkErrorKind::Encode,
                 "CAN frame does not fit struct can_frame",
             ))?;
             out.extend_from_slice(&raw);

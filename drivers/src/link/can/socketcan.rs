@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use super::sys;
 use crate::link::backoff::Backoff;
-use crate::link::error::{ErrorKind, LinkError};
+use crate::link::error::{LinkError, LinkErrorKind};
 use crate::link::port::{LinkState, Port, PortCounters};
 use crate::link::serial::timeout_ms;
 
@@ -96,14 +96,14 @@ pub fn unpack_frame(raw: &[u8; sys::CAN_MTU]) -> RawFrameKind {
 pub fn open_error(iface: &str, step: &'static str, err: io::Error) -> LinkError {
     match err.raw_os_error() {
         Some(libc::EAFNOSUPPORT) | Some(libc::EPROTONOSUPPORT) => LinkError::new(
-            ErrorKind::NotFound,
+            LinkErrorKind::NotFound,
             format!(
                 "opening can:{iface}: this kernel has no SocketCAN support ({step} failed: {err}); \
                  use slcan:PATH with a serial SLCAN adapter instead"
             ),
         ),
         Some(libc::ENODEV) => LinkError::new(
-            ErrorKind::NotFound,
+            LinkErrorKind::NotFound,
             format!("opening can:{iface}: no network interface named `{iface}` ({step}: {err})"),
         ),
         _ => LinkError::io(format!("opening can:{iface}: {step}"), err),
@@ -128,7 +128,7 @@ pub struct SocketCanPort {
     sock: Option<OwnedFd>,
     backoff: Backoff,
     counters: PortCounters,
-    last_error: Option<ErrorKind>,
+    last_error: Option<LinkErrorKind>,
     ended: bool,
     fresh: bool,
 }
@@ -158,12 +158,12 @@ impl SocketCanPort {
             Some(libc::EAGAIN) | Some(libc::ENOBUFS) | Some(libc::EINTR) => {}
             Some(libc::ENETDOWN) => {
                 self.counters.io_errors += 1;
-                self.last_error = Some(ErrorKind::Disconnected);
+                self.last_error = Some(LinkErrorKind::Disconnected);
             }
             Some(libc::ENODEV) | Some(libc::ENXIO) | Some(libc::EBADF) => {
                 if self.sock.take().is_some() {
                     self.counters.disconnects += 1;
-                    self.last_error = Some(ErrorKind::Disconnected);
+                    self.last_error = Some(LinkErrorKind::Disconnected);
                     self.backoff = Backoff::start(Instant::now());
                 }
             }
@@ -188,7 +188,7 @@ impl Port for SocketCanPort {
                     RawFrameKind::Error(class) => {
                         if class & sys::CAN_ERR_BUSOFF != 0 {
                             self.counters.bus_off += 1;
-                            self.last_error = Some(ErrorKind::BusOff);
+                            self.last_error = Some(LinkErrorKind::BusOff);
                             tracing::warn!(iface = %self.iface, "CAN controller is bus-off");
                         } else {
                             self.counters.io_errors += 1;
@@ -301,7 +301,7 @@ impl Port for SocketCanPort {
         sys::CAN_MTU
     }
 
-    fn last_error(&self) -> Option<ErrorKind> {
+    fn last_error(&self) -> Option<LinkErrorKind> {
         self.last_error
     }
 
@@ -367,7 +367,7 @@ mod tests {
             "socket",
             io::Error::from_raw_os_error(libc::EAFNOSUPPORT),
         );
-        assert_eq!(err.kind(), ErrorKind::NotFound);
+        assert_eq!(err.kind(), LinkErrorKind::NotFound);
         assert!(
             err.to_string().contains("this kernel has no SocketCAN support"),
             "{err}"
@@ -377,7 +377,7 @@ mod tests {
             "ioctl(SIOCGIFINDEX)",
             io::Error::from_raw_os_error(libc::ENODEV),
         );
-        assert_eq!(err.kind(), ErrorKind::NotFound);
+        assert_eq!(err.kind(), LinkErrorKind::NotFound);
         assert!(
             err.to_string().contains("no network interface named `can9`"),
             "{err}"

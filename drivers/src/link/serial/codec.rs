@@ -8,7 +8,7 @@ use supine_core::wire::serial::MAX_WIRE_LEN;
 use supine_core::wire::stream::{SerialDecoder, SerialStats};
 
 use crate::link::codec::{Codec, Decoded, Framing};
-use crate::link::error::{ErrorKind, LinkError};
+use crate::link::error::{LinkError, LinkErrorKind};
 
 /// COBS-framed messages.
 #[derive(Debug, Default)]
@@ -50,7 +50,7 @@ impl Codec for SerialCodec {
             Err(_) => {
                 out.clear();
                 Err(LinkError::new(
-                    ErrorKind::Encode,
+                    LinkErrorKind::Encode,
                     "message does not fit a serial frame",
                 ))
             }

@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
 use super::backoff::Backoff;
-use super::error::{ErrorKind, LinkError, kind_of_io};
+use super::error::{LinkError, LinkErrorKind, kind_of_io};
 use super::port::{LinkState, Port, PortCounters};
 
 pub use codec::SerialCodec;
@@ -29,7 +29,7 @@ pub struct SerialPort {
     fd: Option<OwnedFd>,
     backoff: Backoff,
     counters: PortCounters,
-    last_error: Option<ErrorKind>,
+    last_error: Option<LinkErrorKind>,
     ended: bool,
     fresh: bool,
     /// False for a port made from an fd ([`SerialPort::from_fd`]): it has no path to reopen.
@@ -105,7 +105,7 @@ impl SerialPort {
         self.fd.as_ref().and_then(|fd| tty_mode(fd.as_fd()).ok())
     }
 
-    fn went_down(&mut self, kind: ErrorKind) {
+    fn went_down(&mut self, kind: LinkErrorKind) {
         if !self.reopens {
             self.counters.io_errors += 1;
             self.last_error = Some(kind);
@@ -124,8 +124,8 @@ impl SerialPort {
             Some(libc::EAGAIN) | Some(libc::EINTR) => {}
             _ => {
                 let kind = kind_of_io(err);
-                if matches!(kind, ErrorKind::Disconnected | ErrorKind::NotFound) {
-                    self.went_down(ErrorKind::Disconnected);
+                if matches!(kind, LinkErrorKind::Disconnected | LinkErrorKind::NotFound) {
+                    self.went_down(LinkErrorKind::Disconnected);
                 } else {
                     self.counters.io_errors += 1;
                     self.last_error = Some(kind);
@@ -144,7 +144,7 @@ impl Port for SerialPort {
         match sys::read(fd.as_fd(), buf) {
             Ok(0) => {
                 // VMIN = 1 with O_NONBLOCK: 0 bytes means hang-up, not "no data".
-                self.went_down(ErrorKind::Disconnected);
+                self.went_down(LinkErrorKind::Disconnected);
                 0
             }
             Ok(n) => n,
@@ -206,7 +206,7 @@ impl Port for SerialPort {
     }
 
     fn disconnect(&mut self) {
-        self.went_down(ErrorKind::Disconnected);
+        self.went_down(LinkErrorKind::Disconnected);
     }
 
     fn wait_writable(&mut self, timeout: Duration) {
@@ -240,7 +240,7 @@ impl Port for SerialPort {
         self.counters
     }
 
-    fn last_error(&self) -> Option<ErrorKind> {
+    fn last_error(&self) -> Option<LinkErrorKind> {
         self.last_error
     }
 
