@@ -34,60 +34,20 @@
 //! Per-frame cost: shaping the torso subset is `3·n_subset·K` multiply-adds (about 75 k for 1250 vertices and
 //! K = 20, some 30-60 µs on a Cortex-A72 class core); salient points cost `18·K`. Nothing allocates.
 
+use crate::error::BufferLenError;
 use crate::model_file::{LeSlice, ModelFile, ModelFileError, Tag};
+use crate::salient::SalientPoint;
+use crate::wire::BodyRegion;
 
 /// Kind tag of body model files.
 pub const KIND: Tag = *b"BODY";
 /// Format version of the `BODY` kind that this build reads.
 pub const FORMAT_VERSION: u16 = 1;
-/// Number of salient points (paper §3.3): head, left/right shoulder, belly, left/right hip.
-pub const SALIENT_POINTS: usize = 6;
-/// Most shape components a body model may have (the paper and the default model use 20).
-pub const MAX_COMPONENTS: usize = 32;
+/// Shape components of the body model (the paper's 20): the wire's body-shape message carries exactly this many,
+/// and a body model file may have at most this many (a smaller model leaves the rest at zero).
+pub const SHAPE_COMPONENTS: usize = 20;
 /// Bone-parent value of the root bone.
 pub const NO_PARENT: u16 = 0xFFFF;
-
-/// The six salient points, in the order the model (and the wire protocol) stores them.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-#[repr(u8)]
-pub enum SalientPoint {
-    /// Midpoint of the neck base and the skull base joints.
-    Head = 0,
-    /// Left glenohumeral joint.
-    LeftShoulder = 1,
-    /// Right glenohumeral joint.
-    RightShoulder = 2,
-    /// The navel (a surface point: it follows the belly).
-    Belly = 3,
-    /// Left hip joint.
-    LeftHip = 4,
-    /// Right hip joint.
-    RightHip = 5,
-}
-
-impl SalientPoint {
-    /// All six, in storage order.
-    pub const ALL: [SalientPoint; SALIENT_POINTS] = [
-        SalientPoint::Head,
-        SalientPoint::LeftShoulder,
-        SalientPoint::RightShoulder,
-        SalientPoint::Belly,
-        SalientPoint::LeftHip,
-        SalientPoint::RightHip,
-    ];
-
-    /// The snake_case name used in reports and JSON (`head`, `left_shoulder`, ...).
-    pub const fn name(self) -> &'static str {
-        match self {
-            SalientPoint::Head => "head",
-            SalientPoint::LeftShoulder => "left_shoulder",
-            SalientPoint::RightShoulder => "right_shoulder",
-            SalientPoint::Belly => "belly",
-            SalientPoint::LeftHip => "left_hip",
-            SalientPoint::RightHip => "right_hip",
-        }
-    }
-}
 
 /// Coarse body part of a skin vertex (from its dominant skinning bone); used for ground-truth part labels.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -183,6 +143,41 @@ impl BodyPart {
     }
 }
 
+impl BodyPart {
+    /// The wire's [`BodyRegion`] of a point on this part. The probe report names upper-body regions only: the upper
+    /// arms count as their shoulder, and forearms, hands and legs as [`BodyRegion::OffBody`]. The flanks are a
+    /// lateral band of the chest and abdomen: see [`BodyPart::region_at`].
+    pub const fn region(self) -> BodyRegion {
+        use BodyPart::*;
+        match self {
+            Head => BodyRegion::Head,
+            Neck => BodyRegion::Neck,
+            Chest => BodyRegion::Chest,
+            Abdomen => BodyRegion::Abdomen,
+            Pelvis => BodyRegion::Pelvis,
+            LeftUpperArm => BodyRegion::LeftShoulder,
+            RightUpperArm => BodyRegion::RightShoulder,
+            LeftForearm | RightForearm | LeftHand | RightHand | LeftThigh | RightThigh | LeftShank
+            | RightShank | LeftFoot | RightFoot => BodyRegion::OffBody,
+        }
+    }
+
+    /// The region of a point on this part at `lateral`, its signed distance from the torso midline as a fraction of
+    /// the torso half-width (+1 at the patient's left side): chest and abdomen points beyond [`FLANK_FRACTION`]
+    /// are the left or right flank; every other part keeps [`BodyPart::region`].
+    pub fn region_at(self, lateral: f32) -> BodyRegion {
+        match self {
+            BodyPart::Chest | BodyPart::Abdomen if lateral >= FLANK_FRACTION => BodyRegion::LeftFlank,
+            BodyPart::Chest | BodyPart::Abdomen if lateral <= -FLANK_FRACTION => BodyRegion::RightFlank,
+            _ => self.region(),
+        }
+    }
+}
+
+/// Where the flanks begin, as a fraction of the torso half-width from the midline (the side of the torso a frontal
+/// probe cannot reach squarely).
+pub const FLANK_FRACTION: f32 = 0.7;
+
 /// Header counts of a body model.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct BodyModelCounts {
@@ -207,7 +202,7 @@ pub struct BodyModelCounts {
 impl BodyModelCounts {
     /// Rows of the linear model: vertices, then joints, then the salient points.
     pub const fn rows(&self) -> usize {
-        self.vertices + self.joints + SALIENT_POINTS
+        self.vertices + self.joints + SalientPoint::COUNT
     }
 }
 
@@ -231,27 +226,6 @@ pub struct BodyModelView<'a> {
     parts: LeSlice<'a, u8>,
     names: &'a str,
 }
-
-/// A caller buffer had the wrong length for the request.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct BufferLenError {
-    /// Length required.
-    pub expected: usize,
-    /// Length given.
-    pub found: usize,
-}
-
-impl core::fmt::Display for BufferLenError {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        write!(
-            f,
-            "buffer holds {} points, {} required",
-            self.found, self.expected
-        )
-    }
-}
-
-impl core::error::Error for BufferLenError {}
 
 fn invalid(tag: &[u8; 4], what: &'static str) -> ModelFileError {
     ModelFileError::InvalidData { tag: *tag, what }
@@ -282,7 +256,7 @@ impl<'a> BodyModelView<'a> {
             return Err(invalid(b"HEAD", "vertex, joint or bone count out of range"));
         }
         if c.components == 0
-            || c.components > MAX_COMPONENTS
+            || c.components > SHAPE_COMPONENTS
             || c.max_influences == 0
             || c.max_influences > 16
         {
@@ -536,7 +510,7 @@ impl<'a> BodyModelView<'a> {
     }
 
     /// The six salient points for coefficients `s` (rest pose, body frame), in [`SalientPoint::ALL`] order.
-    pub fn salient_points(&self, s: &[f32]) -> [[f32; 3]; SALIENT_POINTS] {
+    pub fn salient_points(&self, s: &[f32]) -> [[f32; 3]; SalientPoint::COUNT] {
         SalientPoint::ALL.map(|p| self.salient_point(p, s))
     }
 
@@ -600,5 +574,25 @@ impl<'a> BodyModelView<'a> {
             .split('\n')
             .take(self.counts.bones)
             .position(|n| n == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_part_has_a_region_and_the_flanks_are_lateral() {
+        for id in 0..BodyPart::COUNT as u8 {
+            let part = BodyPart::from_u8(id).unwrap();
+            assert_eq!(part as u8, id);
+            assert_eq!(part.region_at(0.0), part.region());
+        }
+        assert_eq!(BodyPart::from_u8(BodyPart::COUNT as u8), None);
+        assert_eq!(BodyPart::LeftUpperArm.region(), BodyRegion::LeftShoulder);
+        assert_eq!(BodyPart::LeftThigh.region(), BodyRegion::OffBody);
+        assert_eq!(BodyPart::Abdomen.region_at(0.9), BodyRegion::LeftFlank);
+        assert_eq!(BodyPart::Chest.region_at(-0.8), BodyRegion::RightFlank);
+        assert_eq!(BodyPart::Pelvis.region_at(0.9), BodyRegion::Pelvis);
     }
 }

@@ -9,6 +9,8 @@
 //!
 //! Projection costs a handful of flops per point; nothing here allocates.
 
+use crate::geometry::{Point2, Point3};
+
 /// Pinhole intrinsics in pixels for an image of `width` x `height`.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Intrinsics {
@@ -68,16 +70,19 @@ impl Intrinsics {
     }
 
     /// Project a point in the `camera` frame (metres) to pixel coordinates; `None` behind or on the image plane.
-    pub fn project(&self, p: [f32; 3]) -> Option<[f32; 2]> {
-        if p[2] <= 0.0 {
+    pub fn project(&self, p: &Point3) -> Option<Point2> {
+        if p.z <= 0.0 {
             return None;
         }
-        Some([self.fx * p[0] / p[2] + self.cx, self.fy * p[1] / p[2] + self.cy])
+        Some(Point2::new(
+            self.fx * p.x / p.z + self.cx,
+            self.fy * p.y / p.z + self.cy,
+        ))
     }
 
     /// Back-project pixel (u, v) at depth `z` metres to a point in the `camera` frame.
-    pub fn unproject(&self, u: f32, v: f32, z: f32) -> [f32; 3] {
-        [(u - self.cx) * z / self.fx, (v - self.cy) * z / self.fy, z]
+    pub fn unproject(&self, u: f32, v: f32, z: f32) -> Point3 {
+        Point3::new((u - self.cx) * z / self.fx, (v - self.cy) * z / self.fy, z)
     }
 }
 
@@ -96,19 +101,17 @@ mod tests {
     #[test]
     fn project_unproject_round_trip() {
         let k = Intrinsics::KINECT_V1;
-        let p = [0.31, -0.12, 1.7];
-        let uv = k.project(p).unwrap();
-        let q = k.unproject(uv[0], uv[1], p[2]);
-        for i in 0..3 {
-            assert!((p[i] - q[i]).abs() < 1e-5);
-        }
-        assert_eq!(k.project([0.0, 0.0, -1.0]), None);
+        let p = Point3::new(0.31, -0.12, 1.7);
+        let uv = k.project(&p).unwrap();
+        let q = k.unproject(uv.x, uv.y, p.z);
+        assert!((p - q).norm() < 1e-5);
+        assert_eq!(k.project(&Point3::new(0.0, 0.0, -1.0)), None);
     }
 
     #[test]
     fn openni_world_conversion_agrees() {
         // OpenNI: X = (u/W - 0.5) * Z * 2 tan(hfov/2); pixel (0, 0) at 1000 mm gave X = -560.0 mm with 58.5°.
         let p = Intrinsics::KINECT_V1.unproject(0.0, 0.0, 1.0);
-        assert!((p[0] + 0.5600).abs() < 0.0005, "x {}", p[0]);
+        assert!((p.x + 0.5600).abs() < 0.0005, "x {}", p.x);
     }
 }

@@ -12,20 +12,23 @@ pub const PIXELS: usize = WIDTH * HEIGHT;
 /// The depth value that marks a pixel without a measurement.
 pub const NO_DEPTH: u16 = 0;
 
+use crate::time::Timestamp;
+
 /// A depth image lent by a source, with its capture time and index.
 #[derive(Debug, Clone, Copy)]
 pub struct DepthFrame<'a> {
     depth_mm: &'a [u16],
     width: u16,
     height: u16,
-    /// Capture time of the frame in microseconds on the source's clock (sensor or recording timestamp).
-    pub capture_us: u64,
+    /// Capture time of the frame on the source's clock (sensor or recording timestamp).
+    pub capture: Timestamp,
     /// Frame index as counted by the source (starts at whatever the source reports; gaps mean dropped frames).
     pub index: u32,
 }
 
 /// Why a buffer cannot be viewed as a depth frame.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum FrameError {
     /// The buffer does not hold `width * height` pixels.
     WrongLength {
@@ -55,7 +58,7 @@ impl<'a> DepthFrame<'a> {
         depth_mm: &'a [u16],
         width: u16,
         height: u16,
-        capture_us: u64,
+        capture: Timestamp,
         index: u32,
     ) -> Result<Self, FrameError> {
         let expected = width as usize * height as usize;
@@ -72,7 +75,7 @@ impl<'a> DepthFrame<'a> {
             depth_mm,
             width,
             height,
-            capture_us,
+            capture,
             index,
         })
     }
@@ -108,16 +111,16 @@ mod tests {
     #[test]
     fn length_is_checked() {
         let buf = [0u16; 12];
-        assert!(DepthFrame::new(&buf, 4, 3, 0, 0).is_ok());
+        assert!(DepthFrame::new(&buf, 4, 3, Timestamp::default(), 0).is_ok());
         assert_eq!(
-            DepthFrame::new(&buf, 4, 4, 0, 0).unwrap_err(),
+            DepthFrame::new(&buf, 4, 4, Timestamp::default(), 0).unwrap_err(),
             FrameError::WrongLength {
                 expected: 16,
                 actual: 12
             }
         );
         assert_eq!(
-            DepthFrame::new(&buf[..0], 0, 3, 0, 0).unwrap_err(),
+            DepthFrame::new(&buf[..0], 0, 3, Timestamp::default(), 0).unwrap_err(),
             FrameError::Empty
         );
     }
@@ -126,7 +129,7 @@ mod tests {
     fn pixel_access_is_bounds_checked() {
         let mut buf = [0u16; 12];
         buf[2 * 4 + 3] = 1234;
-        let f = DepthFrame::new(&buf, 4, 3, 7, 1).unwrap();
+        let f = DepthFrame::new(&buf, 4, 3, Timestamp::from_us(7).unwrap(), 1).unwrap();
         assert_eq!(f.at(3, 2), Some(1234));
         assert_eq!(f.at(4, 2), None);
         assert_eq!(f.at(-1, 0), None);

@@ -4,6 +4,13 @@
 //! validated once, working memory is caller-provided with capacities fixed at compile time, and nothing here reads a
 //! clock, a file or the environment (time, frames and model bytes are inputs), so every replay is deterministic.
 //!
+//! Vocabulary (every module speaks it; look here before adding a type):
+//! - [`geometry`]: points, vectors and isometries (nalgebra f32, transforms named `a_from_b`) and [`geometry::Plane`].
+//! - [`time`]: [`time::Timestamp`] (µs, 48 bits) and the [`time::Clock`] the tracker takes.
+//! - [`salient`]: the six salient points, one enum for the model, the forest, the wire and the reports.
+//! - [`body_model::SHAPE_COMPONENTS`]: the shape size (20); [`body_model::BodyPart`] and its wire region.
+//! - [`error`]: small errors shared by several modules ([`error::RangeError`], [`error::BufferLenError`]).
+//!
 //! Layers:
 //! - [`crc`]: the checksums shared by the wire protocol and the model files.
 //! - [`camera`]: pinhole intrinsics of the Kinect v1 depth camera and the named coordinate frames.
@@ -11,6 +18,18 @@
 //! - [`wire`]: the protocol to the arm controller (serial COBS/postcard/CRC-32C, CAN with E2E, SLCAN, candump).
 //! - [`model_file`]: the versioned, checksummed container every model file uses (validated once, borrowed views).
 //! - [`body_model`]: the statistical body model (mean + shape basis, joints, salient points, torso ICP subset).
+//!
+//! Where the tracker's parts go as they land (each a module of its own, named after what it holds):
+//! - `forest/`: the joint forest's model-file view, depth-difference features, inference, weighted mean-shift.
+//! - `shape/`: canonical view, masked subspace projection (Eq. 1), shape regression forest (reusing `forest`).
+//! - `planes`: RANSAC floor and mattress planes, the volume of interest, clipping.
+//! - `icp`: projective point-to-plane ICP with fixed iterations; `fit`: alternating rigid ICP and shape fitting
+//!   (Eq. 7).
+//! - `probe`: probe mapping onto the torso surface (tip, nearest point, normal, signed distance, region).
+//! - `tracker/`: state machine, frame budget, workspace sized at build, `process(frame, arm, clock)`.
+//!
+//! Their trainers, quantisers and evaluations live in `supine-models` (`models/src/forest`, `models/src/shape`,
+//! `models/src/eval`).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::std_instead_of_core))]
 
@@ -18,5 +37,9 @@ pub mod body_model;
 pub mod camera;
 pub mod crc;
 pub mod depth;
+pub mod error;
+pub mod geometry;
 pub mod model_file;
+pub mod salient;
+pub mod time;
 pub mod wire;

@@ -93,6 +93,7 @@ impl ElemType {
 
 /// Why a model file was rejected. Every variant names the offending part, so the message alone is actionable.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum ModelFileError {
     /// The file is shorter than its header or than the length the header declares.
     Truncated {

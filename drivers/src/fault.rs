@@ -125,7 +125,7 @@ impl<S: DepthSource> DepthSource for FaultySource<S> {
             }
             self.buf.clear();
             self.buf.extend_from_slice(frame.depth_mm());
-            break (frame.width(), frame.height(), frame.capture_us, frame.index);
+            break (frame.width(), frame.height(), frame.capture, frame.index);
         };
         if self.rng.chance(self.config.corrupt_frame) {
             self.stats.corrupt_frames += 1;
@@ -179,7 +179,14 @@ mod tests {
         fn next_frame(&mut self, _: Duration) -> Result<DepthFrame<'_>, SourceError> {
             self.i += 1;
             self.buf.fill(1000 + self.i as u16);
-            Ok(DepthFrame::new(&self.buf, 8, 6, self.i as u64 * 10, self.i).unwrap())
+            Ok(DepthFrame::new(
+                &self.buf,
+                8,
+                6,
+                supine_core::time::Timestamp::from_us(self.i as u64 * 10).unwrap(),
+                self.i,
+            )
+            .unwrap())
         }
         fn intrinsics(&self) -> Intrinsics {
             Intrinsics::from_fov(8, 6, 1.0, 0.8)

@@ -123,7 +123,7 @@ mod tests {
         let mut seen = Vec::new();
         loop {
             match rec.next_frame(Duration::ZERO) {
-                Ok(f) => seen.push((f.depth_mm().to_vec(), f.capture_us)),
+                Ok(f) => seen.push((f.depth_mm().to_vec(), f.capture.as_us())),
                 Err(e) => {
                     assert_eq!(e.kind(), SourceErrorKind::EndOfStream);
                     break;
@@ -137,7 +137,7 @@ mod tests {
         for (px, ts) in &seen {
             let f = copy.read_frame().unwrap();
             assert_eq!(f.depth_mm(), &px[..]);
-            assert_eq!(f.capture_us, *ts);
+            assert_eq!(f.capture.as_us(), *ts);
         }
         assert_eq!(
             copy.read_frame().unwrap_err().kind(),

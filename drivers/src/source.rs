@@ -29,6 +29,7 @@ use std::time::Duration;
 
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
+use supine_core::time::Timestamp;
 
 /// What went wrong, coarsely: the part of an error that callers branch on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -313,6 +314,16 @@ pub fn open_with(spec: &SourceSpec, options: &OpenOptions) -> Result<Box<dyn Dep
             "freenect support not compiled in: build with --features freenect (needs libfreenect-dev)",
         )),
     }
+}
+
+/// A device or recording timestamp in µs as a [`Timestamp`]; one of 2^48 µs (8.9 years) or more is corrupt data.
+pub fn capture_time(us: u64) -> Result<Timestamp, SourceError> {
+    Timestamp::from_us(us).ok_or_else(|| {
+        SourceError::new(
+            SourceErrorKind::CorruptData,
+            format!("capture timestamp {us} µs is out of range (at most 2^48 - 1)"),
+        )
+    })
 }
 
 #[cfg(test)]

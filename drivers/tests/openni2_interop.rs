@@ -52,7 +52,7 @@ fn read_through_openni2(src: &mut OpenNi2Source) -> Vec<(Vec<u16>, u64, u32)> {
     let mut out = Vec::new();
     loop {
         match src.next_frame(Duration::from_millis(500)) {
-            Ok(f) => out.push((f.depth_mm().to_vec(), f.capture_us, f.index)),
+            Ok(f) => out.push((f.depth_mm().to_vec(), f.capture.as_us(), f.index)),
             Err(e) => {
                 assert_eq!(e.kind(), SourceErrorKind::EndOfStream, "{e}");
                 return out;
@@ -112,7 +112,7 @@ fn our_reader_reads_a_file_recorded_by_openni2() {
     let mut recorded = Vec::new();
     loop {
         match r.read_frame() {
-            Ok(f) => recorded.push((f.depth_mm().to_vec(), f.capture_us, f.index)),
+            Ok(f) => recorded.push((f.depth_mm().to_vec(), f.capture.as_us(), f.index)),
             Err(e) => {
                 assert_eq!(e.kind(), SourceErrorKind::EndOfStream, "{e}");
                 break;

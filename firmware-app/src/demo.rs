@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use supine_core::wire::{Body, Health, Message, Timestamp, TrackerState};
+use supine_core::wire::{Body, Health, Message, TrackerState};
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use supine_drivers::source::{self, DepthSource, SourceErrorKind, SourceSpec};
 
@@ -113,8 +113,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         let depth = frame.depth_mm();
         let valid = depth.iter().filter(|d| WORKING_RANGE_MM.contains(d)).count();
         valid_fraction_sum += valid as f64 / depth.len() as f64;
-        let timestamp = Timestamp::from_us(frame.capture_us)
-            .ok_or_else(|| anyhow::anyhow!("frame {} has an out-of-range timestamp", frame.index))?;
+        let timestamp = frame.capture;
         let msg = Message {
             seq,
             timestamp,

@@ -3,8 +3,9 @@
 
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
-use supine_core::body_model::{BodyModelView, SalientPoint};
+use supine_core::body_model::BodyModelView;
 use supine_core::model_file::ModelFileError;
+use supine_core::salient::SalientPoint;
 use supine_models::body::file::{BodyFileData, quantise_basis, write_body_model};
 use supine_models::body::{BodyModel, COMPONENTS, PopulationMember, Shape};
 use supine_models::pose::bed::{COMBINATIONS, pose_on_bed};

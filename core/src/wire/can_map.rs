@@ -14,10 +14,12 @@ use heapless::Vec;
 use super::can::{self, CanBase, CanFrame, CanId, field};
 use super::error::{DecodeError, EncodeError};
 use super::message::{
-    ArmState, Body, BodyShape, Command, Health, Kind, Message, ProbeReport, SalientPoint, SalientPoints,
-    TorsoPose,
+    ArmState, Body, BodyShape, Command, Health, Kind, Message, ProbeReport, SalientPointReport,
+    SalientPoints, TorsoPose,
 };
 use super::types::{BodyRegion, Confidence, NormalQ14, Timestamp, TrackerState, UnitQuatQ14};
+use crate::body_model::SHAPE_COMPONENTS;
+use crate::salient::SalientPoint;
 
 /// The six signal bytes of one frame.
 pub type Signals = [u8; field::SIGNAL_LEN];
@@ -243,12 +245,12 @@ pub fn from_signals(kind: Kind, s: &[Signals; MAX_GROUP_FRAMES]) -> Result<Messa
         }),
         Kind::SalientPoints => {
             let frames = [f2, f3, f4, f5, f6, f7];
-            let mut points = [SalientPoint {
+            let mut points = [SalientPointReport {
                 position_mm: [0; 3],
                 confidence: Confidence::default(),
-            }; 6];
+            }; SalientPoint::COUNT];
             for ((p, f), &c) in points.iter_mut().zip(frames).zip(f8.iter()) {
-                *p = SalientPoint {
+                *p = SalientPointReport {
                     position_mm: read_xyz_mm(f),
                     confidence: Confidence::new(c).ok_or(bad)?,
                 };
@@ -263,7 +265,7 @@ pub fn from_signals(kind: Kind, s: &[Signals; MAX_GROUP_FRAMES]) -> Result<Messa
             dropped_frames: get_u32(f4, 0),
         }),
         Kind::BodyShape => {
-            let coefficients_milli: [i16; 20] =
+            let coefficients_milli: [i16; SHAPE_COMPONENTS] =
                 core::array::from_fn(|i| s.get(2 + i / 3).map_or(0, |f| get_i16(f, 2 * (i % 3))));
             Body::BodyShape(BodyShape {
                 revision: h[2],

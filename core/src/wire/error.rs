@@ -66,16 +66,8 @@ impl fmt::Display for EncodeError {
     }
 }
 
-/// A raw value outside the range of a validated wire type.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
-pub struct RangeError;
-
-impl fmt::Display for RangeError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str("value out of range")
-    }
-}
+/// A raw value outside the range of a validated wire type (the crate-wide [`crate::error::RangeError`]).
+pub use crate::error::RangeError;
 
 impl core::error::Error for DecodeError {}
 impl core::error::Error for EncodeError {}
-impl core::error::Error for RangeError {}

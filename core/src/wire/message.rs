@@ -8,6 +8,8 @@ use serde::{Deserialize, Serialize};
 
 use super::error::RangeError;
 use super::types::{BodyRegion, Confidence, NormalQ14, ShapeMode, Timestamp, TrackerState, UnitQuatQ14};
+use crate::body_model::SHAPE_COMPONENTS;
+use crate::salient::SalientPoint;
 
 /// One message: the envelope every kind shares, and the kind's body.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -142,21 +144,21 @@ pub struct TorsoPose {
     pub confidence: Confidence,
 }
 
-/// One salient point.
+/// One salient point as the wire reports it (which one is its index in [`SalientPoints::points`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-pub struct SalientPoint {
+pub struct SalientPointReport {
     /// Position, mm, `robot_base`.
     pub position_mm: [i32; 3],
     /// How much the tracker trusts this point (low while occluded).
     pub confidence: Confidence,
 }
 
-/// The six salient points, indexed by [`SalientPointId`](super::SalientPointId) (head, left shoulder, right
+/// The six salient points, indexed by [`SalientPoint`] (head, left shoulder, right
 /// shoulder, belly, left hip, right hip).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub struct SalientPoints {
-    /// The points in [`SalientPointId`](super::SalientPointId) order.
-    pub points: [SalientPoint; 6],
+    /// The points in [`SalientPoint`] order.
+    pub points: [SalientPointReport; SalientPoint::COUNT],
 }
 
 /// Where the probe tip is relative to the patient's body surface, in the `torso` frame.
@@ -180,8 +182,8 @@ pub struct ProbeReport {
 pub struct BodyShape {
     /// Incremented (wrapping) each time the estimate changes, so the arm can tell a periodic repeat from a change.
     pub revision: u8,
-    /// The 20 coefficients in thousandths of a standard deviation of each principal component (±32.767 sd).
-    pub coefficients_milli: [i16; 20],
+    /// The [`SHAPE_COMPONENTS`] (20) coefficients in thousandths of a standard deviation of each principal component (±32.767 sd).
+    pub coefficients_milli: [i16; SHAPE_COMPONENTS],
 }
 
 /// Tracker state and timing.

@@ -35,12 +35,10 @@ mod roundtrip;
 
 pub use error::{DecodeError, EncodeError};
 pub use message::{
-    ArmState, Body, BodyShape, Command, Health, Kind, Message, ProbeReport, SalientPoint, SalientPoints,
-    TorsoPose,
+    ArmState, Body, BodyShape, Command, Health, Kind, Message, ProbeReport, SalientPointReport,
+    SalientPoints, TorsoPose,
 };
-pub use types::{
-    BodyRegion, Confidence, NormalQ14, SalientPointId, ShapeMode, Timestamp, TrackerState, UnitQuatQ14,
-};
+pub use types::{BodyRegion, Confidence, NormalQ14, ShapeMode, Timestamp, TrackerState, UnitQuatQ14};
 
 /// Protocol version carried in every serial frame (first byte) and in every CAN frame's E2E data id.
 ///

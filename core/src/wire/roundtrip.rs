@@ -13,13 +13,12 @@ use super::can_map::encode_group;
 use super::reassembly::CanReassembler;
 use super::serial::{MAX_PLAIN_LEN, MAX_WIRE_LEN, decode_plain};
 use super::stream::SerialDecoder;
-use super::types::{
-    BodyRegion, Confidence, NormalQ14, SalientPointId, ShapeMode, Timestamp, TrackerState, UnitQuatQ14,
-};
+use super::types::{BodyRegion, Confidence, NormalQ14, ShapeMode, Timestamp, TrackerState, UnitQuatQ14};
 use super::{
-    ArmState, Body, BodyShape, Command, Health, Message, ProbeReport, SalientPoint, SalientPoints, TorsoPose,
-    candump, slcan,
+    ArmState, Body, BodyShape, Command, Health, Message, ProbeReport, SalientPointReport, SalientPoints,
+    TorsoPose, candump, slcan,
 };
+use crate::salient::SalientPoint;
 
 fn mm(can_safe: bool) -> BoxedStrategy<i32> {
     if can_safe {
@@ -54,7 +53,7 @@ fn pick<T: Copy + core::fmt::Debug + 'static>(all: &'static [T]) -> impl Strateg
 }
 
 fn body(can_safe: bool) -> impl Strategy<Value = Body> {
-    let point = (xyz(can_safe), confidence()).prop_map(|(position_mm, confidence)| SalientPoint {
+    let point = (xyz(can_safe), confidence()).prop_map(|(position_mm, confidence)| SalientPointReport {
         position_mm,
         confidence,
     });
@@ -264,17 +263,19 @@ proptest! {
 
 #[test]
 fn worst_case_message_fits_the_frame_bound() {
-    let far = SalientPoint {
+    let far = SalientPointReport {
         position_mm: [i32::MIN; 3],
         confidence: Confidence::FULL,
     };
     let worst = Message {
         seq: u16::MAX,
         timestamp: Timestamp::from_us(Timestamp::MAX_US).unwrap(),
-        body: Body::SalientPoints(SalientPoints { points: [far; 6] }),
+        body: Body::SalientPoints(SalientPoints {
+            points: [far; SalientPoint::COUNT],
+        }),
     };
     let mut plain = [0u8; MAX_PLAIN_LEN];
     let n = worst.emit_plain(&mut plain).unwrap();
     assert_eq!(n, 112);
-    assert_eq!(SalientPointId::ALL.len(), 6);
+    assert_eq!(SalientPoint::COUNT, 6);
 }

@@ -9,7 +9,8 @@
 //! probe-tip pose (probe pointing down, slightly tilted) and asks for continuous shape refinement.
 
 use super::message::{
-    ArmState, Body, BodyShape, Command, Health, Message, ProbeReport, SalientPoint, SalientPoints, TorsoPose,
+    ArmState, Body, BodyShape, Command, Health, Message, ProbeReport, SalientPointReport, SalientPoints,
+    TorsoPose,
 };
 use super::types::{BodyRegion, Confidence, NormalQ14, ShapeMode, Timestamp, TrackerState, UnitQuatQ14};
 
@@ -26,8 +27,8 @@ macro_rules! valid {
 /// Capture time of the sample depth frame.
 pub const CAPTURE: Timestamp = valid!(Timestamp::from_us(1_234_567_890));
 
-const fn point(position_mm: [i32; 3], confidence: u8) -> SalientPoint {
-    SalientPoint {
+const fn point(position_mm: [i32; 3], confidence: u8) -> SalientPointReport {
+    SalientPointReport {
         position_mm,
         confidence: valid!(Confidence::new(confidence)),
     }

@@ -1,6 +1,6 @@
-//! Validated field types of the wire protocol: fixed-point quaternions and normals, confidences, timestamps and the
-//! enumerations. Each newtype can only hold values its documentation allows, so a decoded message is valid by
-//! construction. Validation is a few integer operations per field; nothing allocates.
+//! Validated field types of the wire protocol: fixed-point quaternions and normals, confidences and the
+//! enumerations ([`Timestamp`] is core's own, from [`crate::time`]; salient point ids are [`crate::salient`]'s).
+//! Each newtype can only hold values its documentation allows, so a decoded message is valid by construction. Validation is a few integer operations per field; nothing allocates.
 //!
 //! Enumerations are written as their `u8` value (the same number on serial, on CAN and in the DBC's VAL_ tables),
 //! so that appending a variant never renumbers the others.
@@ -8,6 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::error::RangeError;
+pub use crate::time::Timestamp;
 
 /// Q14 fixed point: 1.0 is 16384, so ±1.0 (and every unit-vector component) is exactly representable in an i16.
 pub const Q14_ONE: i16 = 1 << 14;
@@ -31,52 +32,6 @@ fn to_q14(v: f32) -> i16 {
     let scaled = libm::roundf(v * f32::from(Q14_ONE));
     // Saturate instead of wrapping: a component of exactly 1.0 rounds to 16384, far from the i16 limit anyway.
     scaled.clamp(f32::from(i16::MIN), f32::from(i16::MAX)) as i16
-}
-
-/// Capture time of a depth frame (or, for arm messages, the arm's sample time) in microseconds.
-///
-/// The clock is the tracker's capture clock (by default Linux `CLOCK_MONOTONIC`); it must fit 48 bits
-/// (2^48 µs ≈ 8.9 years), which is what a CAN TIME frame carries.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Hash, Default, Serialize, Deserialize)]
-#[serde(try_from = "u64", into = "u64")]
-pub struct Timestamp(u64);
-
-impl Timestamp {
-    /// The largest representable timestamp, 2^48 - 1 µs.
-    pub const MAX_US: u64 = (1 << 48) - 1;
-
-    /// A timestamp of `us` microseconds; `None` at 2^48 µs or later.
-    pub const fn from_us(us: u64) -> Option<Self> {
-        if us <= Self::MAX_US {
-            Some(Timestamp(us))
-        } else {
-            None
-        }
-    }
-
-    /// Microseconds.
-    pub const fn as_us(self) -> u64 {
-        self.0
-    }
-
-    /// Microseconds from `earlier` to `self`; negative when `earlier` is later.
-    pub const fn since(self, earlier: Timestamp) -> i64 {
-        // Both fit 48 bits, so the difference fits an i64 without overflow.
-        self.0 as i64 - earlier.0 as i64
-    }
-}
-
-impl TryFrom<u64> for Timestamp {
-    type Error = RangeError;
-    fn try_from(us: u64) -> Result<Self, RangeError> {
-        Timestamp::from_us(us).ok_or(RangeError)
-    }
-}
-
-impl From<Timestamp> for u64 {
-    fn from(t: Timestamp) -> u64 {
-        t.0
-    }
 }
 
 /// A confidence in whole percent, 0 (no information) to 100 (certain).
@@ -329,40 +284,9 @@ wire_enum! {
     }
 }
 
-wire_enum! {
-    /// The six salient points, in the order the salient-points message carries them.
-    SalientPointId {
-        /// Head.
-        Head = 0 => "head",
-        /// Left shoulder.
-        LeftShoulder = 1 => "left_shoulder",
-        /// Right shoulder.
-        RightShoulder = 2 => "right_shoulder",
-        /// Belly.
-        Belly = 3 => "belly",
-        /// Left hip.
-        LeftHip = 4 => "left_hip",
-        /// Right hip.
-        RightHip = 5 => "right_hip",
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn timestamp_range() {
-        assert_eq!(
-            Timestamp::from_us(Timestamp::MAX_US).map(Timestamp::as_us),
-            Some((1 << 48) - 1)
-        );
-        assert_eq!(Timestamp::from_us(1 << 48), None);
-        let a = Timestamp::from_us(10).unwrap();
-        let b = Timestamp::from_us(25).unwrap();
-        assert_eq!(b.since(a), 15);
-        assert_eq!(a.since(b), -15);
-    }
 
     #[test]
     fn confidence_range() {
@@ -407,7 +331,6 @@ mod tests {
         assert_eq!(TrackerState::from_u8(6), None);
         assert_eq!(BodyRegion::from_u8(10), None);
         assert_eq!(ShapeMode::from_u8(3), None);
-        assert_eq!(SalientPointId::ALL.len(), 6);
         assert_eq!(TrackerState::SensorFault.name(), "sensor_fault");
     }
 }

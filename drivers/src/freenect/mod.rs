@@ -17,7 +17,7 @@ use std::time::Duration;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::{DepthFrame, HEIGHT, PIXELS, WIDTH};
 
-use crate::source::{DepthSource, SourceError, SourceErrorKind};
+use crate::source::{DepthSource, SourceError, SourceErrorKind, capture_time};
 
 /// The number of Kinects libfreenect sees.
 pub fn device_count() -> Result<usize, SourceError> {
@@ -72,10 +72,14 @@ impl DepthSource for FreenectSource {
             ));
         }
         match self.kinect.wait_frame(&mut self.front, timeout) {
-            sys::Wait::Frame(capture_us, sequence) => {
-                DepthFrame::new(&self.front, WIDTH as u16, HEIGHT as u16, capture_us, sequence)
-                    .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
-            }
+            sys::Wait::Frame(capture_us, sequence) => DepthFrame::new(
+                &self.front,
+                WIDTH as u16,
+                HEIGHT as u16,
+                capture_time(capture_us)?,
+                sequence,
+            )
+            .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string())),
             sys::Wait::Timeout => Err(SourceError::timeout()),
             sys::Wait::Failed(msg) => {
                 self.failed = true;

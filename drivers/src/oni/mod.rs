@@ -20,7 +20,7 @@
 //!   principal point, OpenNI assumes the image centre) and a [`Codec`]. [`OniWriterConfig`] sets the rest (frame
 //!   rate, `xnDeviceMaxDepth`).
 //! - [`OniWriter::write_frame`] takes exactly `width * height` pixels and a timestamp in µs; frame ids count from 1.
-//!   [`OniWriter::write`] takes a [`DepthFrame`](supine_core::depth::DepthFrame) and uses its `capture_us`.
+//!   [`OniWriter::write`] takes a [`DepthFrame`](supine_core::depth::DepthFrame) and uses its `capture` time.
 //! - [`OniWriter::finish`] must be called to get a complete file; a writer dropped without it finishes best-effort
 //!   and logs failures. An unfinished file (a crash) is still playable up to the last whole frame, like one from
 //!   OpenNI's own Recorder.

@@ -13,7 +13,7 @@ use super::{
     Codec, FILE_HEADER_LEN, FILE_MAGIC, MAX_FIELDS, MAX_PAYLOAD, NODE_TYPE_DEPTH, PIXEL_FORMAT_DEPTH_1_MM,
     PIXEL_FORMAT_DEPTH_100_UM, RECORD_HEADER_LEN, RECORD_MAGIC, record_type as rt,
 };
-use crate::source::{DepthSource, SourceError, SourceErrorKind};
+use crate::source::{DepthSource, SourceError, SourceErrorKind, capture_time};
 
 /// What an .oni file says about its depth stream.
 #[derive(Debug, Clone, PartialEq)]
@@ -439,8 +439,14 @@ impl<R: Read + Seek> OniReader<R> {
                 return Err(e);
             }
         };
-        DepthFrame::new(&self.depth, self.info.width, self.info.height, ts, id)
-            .map_err(|e| SourceError::new(SourceErrorKind::Other, format!("{}: {e}", self.name)))
+        DepthFrame::new(
+            &self.depth,
+            self.info.width,
+            self.info.height,
+            capture_time(ts).map_err(|e| e.context(&self.name))?,
+            id,
+        )
+        .map_err(|e| SourceError::new(SourceErrorKind::Other, format!("{}: {e}", self.name)))
     }
 }
 

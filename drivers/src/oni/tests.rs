@@ -41,7 +41,7 @@ fn read_all(bytes: &[u8]) -> (Vec<(Vec<u16>, u64, u32)>, crate::source::SourceEr
     let mut out = Vec::new();
     loop {
         match r.read_frame() {
-            Ok(f) => out.push((f.depth_mm().to_vec(), f.capture_us, f.index)),
+            Ok(f) => out.push((f.depth_mm().to_vec(), f.capture.as_us(), f.index)),
             Err(e) => return (out, e),
         }
     }

@@ -248,7 +248,7 @@ impl<W: Write + Seek> OniWriter<W> {
                 ),
             ));
         }
-        self.write_frame(frame.depth_mm(), frame.capture_us)
+        self.write_frame(frame.depth_mm(), frame.capture.as_us())
     }
 
     /// Complete the file (NODE_REMOVED, SEEK_TABLE, END, header patches), flush it and return the writer.

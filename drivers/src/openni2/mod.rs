@@ -23,7 +23,7 @@ use supine_core::depth::DepthFrame;
 pub use sys::DeviceInfo;
 use sys::{Context, Device, OniError, OniVideoMode, Recorder, Stream};
 
-use crate::source::{DepthSource, SourceError, SourceErrorKind};
+use crate::source::{DepthSource, SourceError, SourceErrorKind, capture_time};
 
 /// How long an .oni playback may take to produce the next frame before it counts as the end of the file.
 pub const FILE_EOF_WAIT: Duration = Duration::from_millis(2000);
@@ -281,8 +281,14 @@ impl DepthSource for OpenNi2Source {
             }
         }
         self.frames_read += 1;
-        DepthFrame::new(&self.depth, w as u16, h as u16, ts, index.max(0) as u32)
-            .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
+        DepthFrame::new(
+            &self.depth,
+            w as u16,
+            h as u16,
+            capture_time(ts)?,
+            index.max(0) as u32,
+        )
+        .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))
     }
 
     fn intrinsics(&self) -> Intrinsics {

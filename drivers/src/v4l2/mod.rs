@@ -24,7 +24,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::{DepthFrame, HEIGHT, PIXELS, WIDTH};
 
 use crate::kinect_raw::{DisparityCalibration, DisparityTable, Y10B_FRAME_BYTES, unpack_y10b};
-use crate::source::{DepthSource, SourceError, SourceErrorKind};
+use crate::source::{DepthSource, SourceError, SourceErrorKind, capture_time};
 
 /// Buffers requested from the driver.
 const BUFFERS: u32 = 4;
@@ -242,7 +242,7 @@ impl DepthSource for V4l2Source {
             &self.depth,
             WIDTH as u16,
             HEIGHT as u16,
-            capture_us,
+            capture_time(capture_us)?,
             newest.sequence,
         )
         .map_err(|e| SourceError::new(SourceErrorKind::Other, e.to_string()))

@@ -7,7 +7,8 @@
 //! Salient points are an object keyed by point name (`head`, `left_shoulder`, ...).
 
 use serde_json::{Map, Value, json};
-use supine_core::wire::{Body, Command, Message, SalientPointId};
+use supine_core::salient::SalientPoint;
+use supine_core::wire::{Body, Command, Message};
 
 /// The JSON object for one message.
 pub fn message(m: &Message) -> Value {
@@ -24,7 +25,7 @@ pub fn message(m: &Message) -> Value {
         }),
         Body::SalientPoints(sp) => {
             let mut points = Map::new();
-            for (id, p) in SalientPointId::ALL.iter().zip(sp.points.iter()) {
+            for (id, p) in SalientPoint::ALL.iter().zip(sp.points.iter()) {
                 points.insert(
                     id.name().into(),
                     json!({ "position_mm": p.position_mm, "confidence_pct": p.confidence.percent() }),

@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use rayon::prelude::*;
 use serde::Serialize;
-use supine_core::body_model::SALIENT_POINTS;
+use supine_core::salient::SalientPoint;
 
 use super::file::{BodyFileData, quantise_basis, write_body_model};
 use super::measure::{Measurements, measure};
@@ -170,8 +170,12 @@ pub struct Built {
 }
 
 /// The stacked rows of one body: skin vertices, joints, salient points (xyz each, f32).
-pub fn body_rows(mesh: &[[f64; 3]], rig: &RigDef, salient: &[Vec<(u32, f64)>; SALIENT_POINTS]) -> Vec<f32> {
-    let mut out = Vec::with_capacity(3 * (BODY_VERTICES + rig.joints.len() + SALIENT_POINTS));
+pub fn body_rows(
+    mesh: &[[f64; 3]],
+    rig: &RigDef,
+    salient: &[Vec<(u32, f64)>; SalientPoint::COUNT],
+) -> Vec<f32> {
+    let mut out = Vec::with_capacity(3 * (BODY_VERTICES + rig.joints.len() + SalientPoint::COUNT));
     for v in &mesh[..BODY_VERTICES] {
         out.extend(v.iter().map(|&x| x as f32));
     }

@@ -72,7 +72,7 @@ fn le<T: Copy, const N: usize>(xs: &[T], f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
 /// Encode a body model file.
 pub fn write_body_model(d: &BodyFileData) -> Result<Vec<u8>> {
     let k = d.sigma.len();
-    let rows = d.n_vertices + d.n_joints + supine_core::body_model::SALIENT_POINTS;
+    let rows = d.n_vertices + d.n_joints + supine_core::salient::SalientPoint::COUNT;
     if d.mean.len() != 3 * rows || d.basis.len() != 3 * rows * k {
         bail!("mean/basis sizes do not match {rows} rows and {k} components");
     }

@@ -50,9 +50,10 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result, bail};
 use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
-use supine_core::body_model::{BodyModelView, SALIENT_POINTS};
+use supine_core::body_model::BodyModelView;
 
-pub use supine_core::body_model::{BodyPart, SalientPoint};
+pub use supine_core::body_model::BodyPart;
+pub use supine_core::salient::SalientPoint;
 
 use crate::pose::{Pose, pose_body};
 
@@ -296,7 +297,7 @@ impl BodyModel {
     }
 
     /// Rest-pose salient points for `shape`, in [`SalientPoint::ALL`] order.
-    pub fn rest_salient_points(&self, shape: &Shape) -> [[f32; 3]; SALIENT_POINTS] {
+    pub fn rest_salient_points(&self, shape: &Shape) -> [[f32; 3]; SalientPoint::COUNT] {
         SalientPoint::ALL.map(|p| self.row(self.n_vertices + self.n_joints + p as usize, shape))
     }
 
@@ -347,7 +348,7 @@ pub struct PosedBody<'m> {
     /// [`BodyPart`] id of each vertex, shared with the model.
     pub part_of_vertex: &'m [u8],
     /// The six salient points, in [`SalientPoint::ALL`] order, posed.
-    pub salient_points: [[f32; 3]; SALIENT_POINTS],
+    pub salient_points: [[f32; 3]; SalientPoint::COUNT],
     /// Rig joints, posed.
     pub joints: Vec<[f32; 3]>,
 }

@@ -10,7 +10,8 @@ use std::collections::HashMap;
 
 use anyhow::{Context, Result, anyhow, bail};
 use serde_json::Value;
-use supine_core::body_model::{BodyPart, SALIENT_POINTS};
+use supine_core::body_model::BodyPart;
+use supine_core::salient::SalientPoint;
 
 use crate::assets::{Assets, BODY_VERTICES, BaseMesh};
 
@@ -304,7 +305,7 @@ pub fn load_rig(assets: &mut Assets, base: &BaseMesh) -> Result<RigDef> {
 /// The six salient points as weighted vertex sums (indices into all 19158), in
 /// [`supine_core::body_model::SalientPoint::ALL`] order: head = midpoint of the joint-neck and joint-head cubes,
 /// shoulders = joint-l/r-shoulder, belly = navel vertex 4116, hips = joint-l/r-upper-leg.
-pub fn salient_defs(base: &BaseMesh) -> Result<[Vec<(u32, f64)>; SALIENT_POINTS]> {
+pub fn salient_defs(base: &BaseMesh) -> Result<[Vec<(u32, f64)>; SalientPoint::COUNT]> {
     let cube = |n: &str| -> Result<Vec<u32>> {
         base.groups
             .get(n)

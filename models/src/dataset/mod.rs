@@ -300,7 +300,7 @@ pub fn project_salient(
         [q.x, q.y, q.z]
     });
     // Behind the camera (never in these scenes) is (−1, −1): JSON has no NaN.
-    let px = cam.map(|p| k.project(p).unwrap_or([-1.0, -1.0]));
+    let px = cam.map(|p| k.project(&p.into()).map_or([-1.0, -1.0], |uv| uv.coords.into()));
     (cam, px)
 }
 

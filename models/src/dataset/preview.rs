@@ -136,7 +136,8 @@ pub fn draw_truth(
         draw_cross(rgb, width, height, p[0], p[1], c);
     }
     if let Some(m) = camera_from_probe
-        && let Some(uv) = supine_core::camera::Intrinsics::KINECT_V1.project([m[0][3], m[1][3], m[2][3]])
+        && let Some(uv) = supine_core::camera::Intrinsics::KINECT_V1
+            .project(&supine_core::geometry::Point3::new(m[0][3], m[1][3], m[2][3]))
     {
         draw_ring(rgb, width, height, uv[0], uv[1], 7.0, [255, 255, 255]);
     }

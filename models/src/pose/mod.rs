@@ -21,7 +21,7 @@ pub mod bed;
 pub use bed::{ArmPose, BedPose, BedPoseSampler, LegPose, Lying, TrunkPose};
 
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use supine_core::body_model::SalientPoint;
+use supine_core::salient::SalientPoint;
 
 use crate::body::rig::NAVEL_VERTEX;
 use crate::body::{BodyModel, PosedBody, Shape};

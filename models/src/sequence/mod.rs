@@ -416,7 +416,7 @@ mod tests {
             match reader.read_frame() {
                 Ok(frame) => {
                     assert!(frame.depth_mm().iter().filter(|&&d| d > 0).count() > 50_000);
-                    assert_eq!(frame.capture_us, lines[frames].time_us);
+                    assert_eq!(frame.capture.as_us(), lines[frames].time_us);
                     frames += 1;
                 }
                 Err(e) if e.kind() == supine_drivers::SourceErrorKind::EndOfStream => break,
