@@ -24,7 +24,7 @@ use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
 use crate::scene::body::{BodySource, PosedBody, SALIENT_NAMES};
 use crate::scene::shapes::vertex_normals;
-use crate::scene::{BedParams, Plane, Scene, ViewParams, matrix_rows};
+use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
 use format::{BodyRecord, BodyWriter};
 use nalgebra::{Isometry3, Point3, Vector3};
@@ -35,6 +35,7 @@ use rand_chacha::rand_core::SeedableRng;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use supine_core::camera::Intrinsics;
+use supine_core::geometry::Plane;
 
 /// SplitMix64 finaliser: decorrelates (seed, index) pairs into independent stream seeds.
 pub fn mix_seed(seed: u64, index: u64) -> u64 {

@@ -24,34 +24,7 @@ use nalgebra::{Isometry3, Matrix4, Point3, Rotation3, Translation3, UnitQuaterni
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use shapes::TriMesh;
-
-/// A plane `n·p + d = 0` with unit normal `n` (pointing up / toward the camera side of the surface).
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Plane {
-    /// Unit normal.
-    pub normal: [f32; 3],
-    /// Offset: `n·p + d = 0` on the plane.
-    pub d: f32,
-}
-
-impl Plane {
-    /// The plane through `point` with unit `normal`.
-    pub fn through(point: Vector3<f32>, normal: Vector3<f32>) -> Plane {
-        Plane {
-            normal: normal.into(),
-            d: -normal.dot(&point),
-        }
-    }
-
-    /// This plane expressed in frame `a`, given `a_from_b` and the plane in frame `b`.
-    pub fn transformed(&self, a_from_b: &Isometry3<f32>) -> Plane {
-        let n = a_from_b.rotation * Vector3::from(self.normal);
-        Plane {
-            normal: n.into(),
-            d: self.d - n.dot(&a_from_b.translation.vector),
-        }
-    }
-}
+use supine_core::geometry::Plane;
 
 /// Bed geometry (metres, radians).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -17,7 +17,7 @@ use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
 use crate::scene::body::{BodySource, PosedBody};
 use crate::scene::shapes::vertex_normals;
-use crate::scene::{BedParams, Plane, Scene, ViewParams, matrix_rows};
+use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
@@ -26,6 +26,7 @@ use rand_chacha::rand_core::SeedableRng;
 use std::io::Write;
 use std::path::Path;
 use supine_core::camera::Intrinsics;
+use supine_core::geometry::Plane;
 use supine_drivers::oni::{Codec, OniWriter};
 
 /// Parameters of a sequence.
