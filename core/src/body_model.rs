@@ -580,6 +580,97 @@ impl<'a> BodyModelView<'a> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::fixture::{self, COMPONENTS, ROWS, TINY_BODY_LEN};
+
+    fn tiny() -> ([u8; TINY_BODY_LEN], usize) {
+        let mut buf = [0u8; TINY_BODY_LEN];
+        let n = fixture::tiny_body_model(&mut buf).unwrap();
+        (buf, n)
+    }
+
+    fn close(a: [f32; 3], b: [f32; 3]) -> bool {
+        (0..3).all(|c| (a[c] - b[c]).abs() < 1e-6)
+    }
+
+    #[test]
+    fn the_view_reads_what_the_fixture_wrote() {
+        let (buf, n) = tiny();
+        let v = BodyModelView::parse(&buf[..n]).unwrap();
+        let c = v.counts();
+        assert_eq!(
+            (c.vertices, c.joints, c.components, c.bones),
+            (4, 2, COMPONENTS, 2)
+        );
+        assert_eq!(c.rows(), ROWS);
+        let s = [0.7f32, -1.3];
+        for vtx in 0..c.vertices {
+            assert!(
+                close(v.shape_vertex(vtx, &s), fixture::shaped(vtx, &s)),
+                "vertex {vtx}"
+            );
+            assert_eq!(v.part_of_vertex(vtx), fixture::PARTS[vtx]);
+        }
+        for j in 0..c.joints {
+            assert!(
+                close(v.joint(j, &s), fixture::shaped(c.vertices + j, &s)),
+                "joint {j}"
+            );
+        }
+        for p in SalientPoint::ALL {
+            let row = c.vertices + c.joints + p.index();
+            assert!(
+                close(v.salient_point(p, &s), fixture::shaped(row, &s)),
+                "{}",
+                p.name()
+            );
+        }
+        let mut subset = [[0.0; 3]; 3];
+        v.shape_torso_subset(&s, &mut subset).unwrap();
+        for (i, &vtx) in fixture::SUBSET.iter().enumerate() {
+            assert!(close(subset[i], fixture::shaped(vtx as usize, &s)));
+        }
+        assert_eq!(
+            v.shape_torso_subset(&s, &mut subset[..2]),
+            Err(BufferLenError {
+                expected: 3,
+                found: 2
+            })
+        );
+        assert_eq!(v.bone_parent(0), None);
+        assert_eq!(v.bone_parent(1), Some(0));
+        assert_eq!(v.bone_name(1), "spine");
+        assert_eq!(v.joint_name(1), "j-neck");
+        assert_eq!(v.bone_index("spine"), Some(1));
+        assert_eq!(v.skin_influence(1, 0).0, 0);
+        assert!((v.skin_influence(1, 0).1 - 0.5).abs() < 1e-4);
+        assert_eq!(v.sigma(1), fixture::SIGMA[1]);
+    }
+
+    #[test]
+    fn every_damaged_byte_is_an_error_not_a_panic() {
+        let (buf, n) = tiny();
+        // Flipping any byte breaks the CRC (or, in the CRC field itself, disagrees with it): always an error.
+        for at in 0..n {
+            let mut bad = buf;
+            bad[at] ^= 0x5A;
+            assert!(
+                BodyModelView::parse(&bad[..n]).is_err(),
+                "flip at byte {at} accepted"
+            );
+        }
+        for len in 0..n {
+            assert!(
+                BodyModelView::parse(&buf[..len]).is_err(),
+                "truncated to {len} accepted"
+            );
+        }
+        let mut other_kind = [0u8; TINY_BODY_LEN];
+        let m = crate::model_file::write(*b"FRST", 1, &[], &mut other_kind).unwrap();
+        assert!(matches!(
+            BodyModelView::parse(&other_kind[..m]),
+            Err(ModelFileError::WrongKind { .. })
+        ));
+    }
 
     #[test]
     fn every_part_has_a_region_and_the_flanks_are_lateral() {

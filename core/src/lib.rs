@@ -18,6 +18,7 @@
 //! - [`wire`]: the protocol to the arm controller (serial COBS/postcard/CRC-32C, CAN with E2E, SLCAN, candump).
 //! - [`model_file`]: the versioned, checksummed container every model file uses (validated once, borrowed views).
 //! - [`body_model`]: the statistical body model (mean + shape basis, joints, salient points, torso ICP subset).
+//! - `fixture` (tests, or the `fixtures` feature): tiny model files written with [`model_file::write`].
 //!
 //! Where the tracker's parts go as they land (each a module of its own, named after what it holds):
 //! - `forest/`: the joint forest's model-file view, depth-difference features, inference, weighted mean-shift.
@@ -38,6 +39,8 @@ pub mod camera;
 pub mod crc;
 pub mod depth;
 pub mod error;
+#[cfg(any(test, feature = "fixtures"))]
+pub mod fixture;
 pub mod geometry;
 pub mod model_file;
 pub mod salient;

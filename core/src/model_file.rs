@@ -616,6 +616,7 @@ pub struct SectionData<'a> {
 
 /// Why [`write`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[non_exhaustive]
 pub enum WriteError {
     /// More than [`MAX_SECTIONS`] sections.
     TooManySections,

@@ -45,6 +45,7 @@ pub mod phenotype;
 pub mod population;
 pub mod rig;
 
+use std::borrow::Cow;
 use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result, bail};
@@ -337,23 +338,37 @@ impl BodyModel {
     }
 }
 
-/// A posed body: what the renderer draws and what the ground truth records. Vertices and points share one frame
-/// (the body frame from [`BodyModel::pose`], or whatever [`PosedBody::transformed`] moved them to).
+/// A posed body: what the renderer draws and what the ground truth records, from the statistical model or the
+/// mannequin. Vertices and points share one frame (the body frame from [`BodyModel::pose`], or whatever
+/// [`PosedBody::transformed`] or the scene moved them to). Triangles and part ids are borrowed from the model when
+/// posing it, owned by bodies that carry them themselves (the mannequin, a scene's patient).
 #[derive(Clone, Debug)]
 pub struct PosedBody<'m> {
     /// Skin vertex positions, metres.
     pub vertices: Vec<[f32; 3]>,
-    /// Skin triangles (counter-clockwise seen from outside), shared with the model.
-    pub triangles: &'m [[u32; 3]],
-    /// [`BodyPart`] id of each vertex, shared with the model.
-    pub part_of_vertex: &'m [u8],
+    /// Skin triangles (counter-clockwise seen from outside).
+    pub triangles: Cow<'m, [[u32; 3]]>,
+    /// Part id of each vertex: a [`BodyPart`] for the statistical model, an index into the source's part names
+    /// otherwise (see [`crate::scene::body::BodySource::part_names`]).
+    pub part_of_vertex: Cow<'m, [u8]>,
     /// The six salient points, in [`SalientPoint::ALL`] order, posed.
     pub salient_points: [[f32; 3]; SalientPoint::COUNT],
-    /// Rig joints, posed.
+    /// Rig joints, posed (empty for bodies without a rig, such as the mannequin).
     pub joints: Vec<[f32; 3]>,
 }
 
 impl PosedBody<'_> {
+    /// The same body owning its triangles and part ids (a copy of them when they were borrowed).
+    pub fn into_owned(self) -> PosedBody<'static> {
+        PosedBody {
+            vertices: self.vertices,
+            triangles: Cow::Owned(self.triangles.into_owned()),
+            part_of_vertex: Cow::Owned(self.part_of_vertex.into_owned()),
+            salient_points: self.salient_points,
+            joints: self.joints,
+        }
+    }
+
     /// Body part id of each triangle: the part of its first vertex (a triangle never spans more than two parts, and
     /// the first-vertex rule keeps labels stable and deterministic).
     pub fn part_of_triangle(&self) -> Vec<u8> {
@@ -371,8 +386,8 @@ impl PosedBody<'_> {
         };
         PosedBody {
             vertices: self.vertices.iter().map(f).collect(),
-            triangles: self.triangles,
-            part_of_vertex: self.part_of_vertex,
+            triangles: self.triangles.clone(),
+            part_of_vertex: self.part_of_vertex.clone(),
             salient_points: self.salient_points.map(|p| f(&p)),
             joints: self.joints.iter().map(f).collect(),
         }

@@ -22,7 +22,7 @@ pub mod preview;
 use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
 use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
-use crate::scene::body::{BodySource, PosedBody, SALIENT_NAMES};
+use crate::scene::body::{BodySource, Patient};
 use crate::scene::shapes::vertex_normals;
 use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
@@ -36,6 +36,7 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 use supine_core::camera::Intrinsics;
 use supine_core::geometry::Plane;
+use supine_core::salient::SalientPoint;
 
 /// SplitMix64 finaliser: decorrelates (seed, index) pairs into independent stream seeds.
 pub fn mix_seed(seed: u64, index: u64) -> u64 {
@@ -318,11 +319,11 @@ pub fn generate_body(
     on_image: &(dyn Fn() + Sync),
 ) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, index as u64));
-    let body: PosedBody = source
+    let body: Patient = source
         .sample(&mut rng)
         .with_context(|| format!("sampling body {index}"))?;
     let bed = BedParams::sample(&mut rng, body.head_raise_rad, body.hinge_y_m);
-    let mut scene = Scene::new(&body, bed);
+    let mut scene = Scene::new(&body.body, bed);
     let nominal = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
     let truth = BodyTruth {
         body_index: index,
@@ -474,7 +475,7 @@ pub fn generate(
         config: cfg.clone(),
         body_source: source.name(),
         intrinsics: [k.fx, k.fy, k.cx, k.cy, k.width as f32, k.height as f32],
-        salient_names: SALIENT_NAMES.iter().map(|s| s.to_string()).collect(),
+        salient_names: SalientPoint::ALL.iter().map(|p| p.name().to_string()).collect(),
         labels: [
             Label::None,
             Label::Floor,

@@ -24,6 +24,8 @@ use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vecto
 use supine_core::salient::SalientPoint;
 
 use crate::body::rig::NAVEL_VERTEX;
+use std::borrow::Cow;
+
 use crate::body::{BodyModel, PosedBody, Shape};
 
 /// Per-bone rotations (Euler XYZ, radians, bone-local, relative to rest) and a root translation (metres).
@@ -226,8 +228,8 @@ pub fn pose_body<'m>(model: &'m BodyModel, shape: &Shape, pose: &Pose) -> PosedB
     });
     PosedBody {
         vertices,
-        triangles: &model.triangles,
-        part_of_vertex: &model.part_of_vertex,
+        triangles: Cow::Borrowed(&model.triangles),
+        part_of_vertex: Cow::Borrowed(&model.part_of_vertex),
         salient_points,
         joints,
     }

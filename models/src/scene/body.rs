@@ -5,36 +5,24 @@
 //! The statistical model (MakeHuman mesh, PCA shapes, LBS, bed poses) is adapted to [`BodySource`] in
 //! [`super::model_body`]. Sampling a mannequin costs a few thousand vertices; no per-frame cost.
 
+use std::borrow::Cow;
+
 use super::shapes::TriMesh;
+use crate::body::PosedBody;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
 
-/// Names of the six salient points, in the order every `salient` array uses.
-pub const SALIENT_NAMES: [&str; 6] = [
-    "head",
-    "left_shoulder",
-    "right_shoulder",
-    "belly",
-    "left_hip",
-    "right_hip",
-];
-
-/// A posed body lying on the bed, in the **bed frame**: metres, origin on the mattress top at its centre, z up, y
-/// toward the head end, x the patient's left when supine (the body model's bed frame).
+/// The patient lying on the bed: a posed body in the **bed frame** (metres, origin on the mattress top at its
+/// centre, z up, y toward the head end, x the patient's left when supine) and what the ground truth records about it.
 #[derive(Debug, Clone)]
-pub struct PosedBody {
-    /// Skin vertices.
-    pub vertices: Vec<[f32; 3]>,
-    /// Skin triangles.
-    pub triangles: Vec<[u32; 3]>,
-    /// Body-part id per vertex (see [`PosedBody::part_names`]).
-    pub vertex_part: Vec<u8>,
-    /// Names of the part ids.
+pub struct Patient {
+    /// The posed body (skin, part ids, salient points in [`SalientPoint`](supine_core::salient::SalientPoint)
+    /// order, joints), bed frame.
+    pub body: PosedBody<'static>,
+    /// Names of the part ids of [`PosedBody::part_of_vertex`].
     pub part_names: Vec<String>,
-    /// Salient points in [`SALIENT_NAMES`] order.
-    pub salient: [[f32; 3]; 6],
     /// Shape coefficients (population-model units, e.g. PCA standard deviations).
     pub shape: Vec<f32>,
     /// Pose parameters as the source describes them (recorded verbatim in the ground truth).
@@ -45,28 +33,17 @@ pub struct PosedBody {
     pub hinge_y_m: f32,
 }
 
-impl PosedBody {
-    /// Part id per triangle: the part of its first vertex (parts are contiguous regions, so this only matters on
-    /// part boundaries).
-    pub fn triangle_parts(&self) -> Vec<u8> {
-        self.triangles
-            .iter()
-            .map(|t| self.vertex_part[t[0] as usize])
-            .collect()
-    }
-}
-
-/// Something that produces posed bodies: the statistical model or the mannequin.
+/// Something that produces patients: the statistical model or the mannequin.
 pub trait BodySource: Sync {
     /// Short name recorded in dataset metadata.
     fn name(&self) -> String;
-    /// Body-part names indexed by the part ids of [`PosedBody::vertex_part`].
+    /// Body-part names indexed by the part ids of [`PosedBody::part_of_vertex`].
     fn part_names(&self) -> Vec<String>;
     /// A random body (shape from the population, pose from the bed-pose distribution), deterministic for `rng`.
-    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<PosedBody>;
+    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<Patient>;
     /// The body with `shape` fixed and the pose blended between two sampled poses (`t` in 0..1), for slow motion in
     /// sequences: `a` and `b` are pose seeds. Sources that cannot interpolate return the `a` pose.
-    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<PosedBody>;
+    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<Patient>;
 }
 
 /// Parameters of the procedural mannequin.
@@ -140,7 +117,7 @@ impl Mannequin {
     }
 
     /// Build the posed mesh for `p`, lying supine on the bed (see [`lie_on_bed`]).
-    pub fn build(p: &MannequinParams) -> PosedBody {
+    pub fn build(p: &MannequinParams) -> Patient {
         let height = 1.72 * (1.0 + 0.055 * p.shape[0]);
         let girth = 1.0 + 0.08 * p.shape[1];
         let belly = 1.0 + 0.12 * p.shape[2];
@@ -223,12 +200,15 @@ impl Mannequin {
             mesh.append(m, &Isometry3::identity());
             vertex_part.resize(mesh.vertices.len(), *id);
         }
-        let mut body = PosedBody {
-            vertices: mesh.vertices,
-            triangles: mesh.triangles,
-            vertex_part,
+        let mut body = Patient {
+            body: PosedBody {
+                vertices: mesh.vertices,
+                triangles: Cow::Owned(mesh.triangles),
+                part_of_vertex: Cow::Owned(vertex_part),
+                salient_points: salient,
+                joints: Vec::new(),
+            },
             part_names: Mannequin.part_names(),
-            salient,
             shape: p.shape.to_vec(),
             pose: serde_json::to_value(p).unwrap_or(serde_json::Value::Null),
             head_raise_rad: 0.0,
@@ -244,7 +224,8 @@ impl Mannequin {
 /// supine with the hips `hinge_y − 0.05` m along the bed, rolled by `side_tilt` about its long axis, resting on the
 /// mattress (lowest point 1 cm into it), then bent about the hinge line by `head_raise` with a 16 cm blend band so
 /// the upper body lies on the raised head section. Salient points move with the skin.
-pub fn lie_on_bed(body: &mut PosedBody, hips: Vector3<f32>, side_tilt: f32, head_raise: f32, hinge_y: f32) {
+pub fn lie_on_bed(patient: &mut Patient, hips: Vector3<f32>, side_tilt: f32, head_raise: f32, hinge_y: f32) {
+    let body = &mut patient.body;
     let bed_from_body = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), side_tilt)
         * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), -std::f32::consts::FRAC_PI_2);
     let place = |p: [f32; 3]| bed_from_body * (Vector3::from(p) - hips);
@@ -261,11 +242,11 @@ pub fn lie_on_bed(body: &mut PosedBody, hips: Vector3<f32>, side_tilt: f32, head
         let (y, z) = (q.y - hinge_y, q.z);
         Vector3::new(q.x, hinge_y + c * y - s * z, s * y + c * z)
     };
-    for v in body.vertices.iter_mut().chain(body.salient.iter_mut()) {
+    for v in body.vertices.iter_mut().chain(body.salient_points.iter_mut()) {
         *v = bend(place(*v) + offset).into();
     }
-    body.head_raise_rad = head_raise;
-    body.hinge_y_m = hinge_y;
+    patient.head_raise_rad = head_raise;
+    patient.hinge_y_m = hinge_y;
 }
 
 impl BodySource for Mannequin {
@@ -277,11 +258,11 @@ impl BodySource for Mannequin {
         MANNEQUIN_PARTS.iter().map(|s| s.to_string()).collect()
     }
 
-    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<PosedBody> {
+    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<Patient> {
         Ok(Mannequin::build(&Mannequin::sample_params(rng)))
     }
 
-    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<PosedBody> {
+    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<Patient> {
         use rand_chacha::rand_core::SeedableRng;
         let shape = Mannequin::sample_params(&mut ChaCha8Rng::seed_from_u64(shape_seed)).shape;
         let pa = Mannequin::sample_params(&mut ChaCha8Rng::seed_from_u64(a));

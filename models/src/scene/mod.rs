@@ -18,8 +18,8 @@ pub mod body;
 pub mod model_body;
 pub mod shapes;
 
+use crate::body::PosedBody;
 use crate::render::{DrawMesh, Label, Renderer};
-use body::PosedBody;
 use nalgebra::{Isometry3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -223,7 +223,7 @@ pub struct Scene {
 
 impl Scene {
     /// Put `body` (bed frame) on `bed` in the room.
-    pub fn new(body: &PosedBody, bed: BedParams) -> Scene {
+    pub fn new(body: &PosedBody<'_>, bed: BedParams) -> Scene {
         let wfb = bed.world_from_bed();
         let to_world = |p: &[f32; 3]| {
             let q = wfb * Point3::from(*p);
@@ -246,9 +246,9 @@ impl Scene {
             floor,
             bed_mesh,
             body_vertices: body.vertices.iter().map(to_world).collect(),
-            body_triangles: body.triangles.clone(),
-            body_triangle_parts: body.triangle_parts(),
-            salient_world: body.salient.map(|p| to_world(&p)),
+            body_triangles: body.triangles.to_vec(),
+            body_triangle_parts: body.part_of_triangle(),
+            salient_world: body.salient_points.map(|p| to_world(&p)),
             arm: None,
         }
     }

@@ -5,7 +5,7 @@
 //!
 //! Cost per sample: one LBS of the MakeHuman mesh (~10 ms) and a copy of its triangles.
 
-use super::body::{BodySource, PosedBody};
+use super::body::{BodySource, Patient};
 use crate::body::{BodyModel, BodyPart, Shape};
 use crate::pose::bed::pose_on_bed;
 use crate::pose::{BedPose, BedPoseSampler};
@@ -38,15 +38,14 @@ impl ModelBodySource {
         })
     }
 
-    fn on_bed(&self, shape: &Shape, bed: &BedPose, pose_json: serde_json::Value) -> PosedBody {
+    fn on_bed(&self, shape: &Shape, bed: &BedPose, pose_json: serde_json::Value) -> Patient {
         let posed = pose_on_bed(&self.model, shape, bed);
-        let shift = |p: &[f32; 3]| [p[0], p[1] + HIP_Y, p[2]];
-        PosedBody {
-            vertices: posed.vertices.iter().map(shift).collect(),
-            triangles: posed.triangles.to_vec(),
-            vertex_part: posed.part_of_vertex.to_vec(),
+        let body = posed
+            .transformed(&nalgebra::Isometry3::translation(0.0, HIP_Y, 0.0))
+            .into_owned();
+        Patient {
+            body,
             part_names: self.part_names(),
-            salient: posed.salient_points.map(|p| shift(&p)),
             shape: shape.normalised(&self.model).to_vec(),
             pose: pose_json,
             head_raise_rad: bed.lying.head_raise_rad,
@@ -66,7 +65,7 @@ impl BodySource for ModelBodySource {
             .collect()
     }
 
-    fn sample(&self, rng: &mut ChaCha8Rng) -> Result<PosedBody> {
+    fn sample(&self, rng: &mut ChaCha8Rng) -> Result<Patient> {
         let shape = self.model.sample_shape(rng);
         let bed = self.sampler.sample(rng);
         let json = serde_json::to_value(&bed)?;
@@ -75,7 +74,7 @@ impl BodySource for ModelBodySource {
 
     /// Pose `a`'s sub-pose combination and lying, blended toward the same combination with other arm sub-poses
     /// (drawn from `b`): the trunk and legs stay, the arms move.
-    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> Result<PosedBody> {
+    fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> Result<Patient> {
         let shape = self
             .model
             .sample_shape(&mut ChaCha8Rng::seed_from_u64(shape_seed));

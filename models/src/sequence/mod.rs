@@ -11,11 +11,12 @@
 
 pub mod cli;
 
+use crate::body::PosedBody;
 use crate::dataset::{contact_at, mix_seed, project_salient};
 use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
 use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
-use crate::scene::body::{BodySource, PosedBody};
+use crate::scene::body::BodySource;
 use crate::scene::shapes::vertex_normals;
 use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
@@ -149,14 +150,14 @@ pub fn torso_pose(salient: &[[f32; 3]; 6]) -> Isometry3<f32> {
 /// Lift the front of the chest and belly by `rise` metres along the skin normal (back and limbs stay), weighted by a
 /// smooth window between hips and shoulders and by how much the skin faces out of the chest. The belly point moves
 /// with the skin under it.
-pub fn breathe(body: &mut PosedBody, torso_parts: &[u8], rise: f32) {
+pub fn breathe(body: &mut PosedBody<'_>, torso_parts: &[u8], rise: f32) {
     if rise == 0.0 {
         return;
     }
-    let t = torso_pose(&body.salient);
+    let t = torso_pose(&body.salient_points);
     let up = t.rotation * Vector3::z();
     let axis = t.rotation * Vector3::y();
-    let len = ((Vector3::from(body.salient[1]) + Vector3::from(body.salient[2])) * 0.5
+    let len = ((Vector3::from(body.salient_points[1]) + Vector3::from(body.salient_points[2])) * 0.5
         - t.translation.vector)
         .norm();
     let normals = vertex_normals(&body.vertices, &body.triangles);
@@ -170,14 +171,14 @@ pub fn breathe(body: &mut PosedBody, torso_parts: &[u8], rise: f32) {
         window * n.dot(&up).max(0.0)
     };
     for (i, v) in body.vertices.iter_mut().enumerate() {
-        if torso_parts.contains(&body.vertex_part[i]) {
+        if torso_parts.contains(&body.part_of_vertex[i]) {
             let n = Vector3::from(normals[i]);
             let p = Vector3::from(*v);
             *v = (p + n * (rise * weight(p, n))).into();
         }
     }
-    let belly = Vector3::from(body.salient[3]);
-    body.salient[3] = (belly + up * (rise * weight(belly, up))).into();
+    let belly = Vector3::from(body.salient_points[3]);
+    body.salient_points[3] = (belly + up * (rise * weight(belly, up))).into();
 }
 
 /// Generate a sequence into `dir`; `on_frame` is called after each frame with its index and the noisy depth image
@@ -203,7 +204,7 @@ pub fn generate(
         .map(|(i, _)| i as u8)
         .collect();
     let bed = BedParams::sample(&mut rng, first.head_raise_rad, first.hinge_y_m);
-    let scene0 = Scene::new(&first, bed);
+    let scene0 = Scene::new(&first.body, bed);
     let view = ViewParams::sample_nominal(&mut rng, scene0.torso_centre()).sample_view(&mut rng);
     let cfw = view.camera_from_world(scene0.midline_y(), bed.mattress_top);
     let arm_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
@@ -240,7 +241,7 @@ pub fn generate(
         let time_us = (f as f64 * 1e6 / cfg.fps as f64).round() as u64;
         // Arms blend slowly (30 s period) between two sub-poses; the torso drifts a few cm and rolls a degree or two.
         let arm_blend = 0.5 - 0.5 * (tau * time / 30.0).cos();
-        let mut body = source.sample_motion(shape_seed, pose_a, pose_b, arm_blend)?;
+        let mut body = source.sample_motion(shape_seed, pose_a, pose_b, arm_blend)?.body;
         let breath = 0.5 - 0.5 * (tau * cfg.breathing_hz * time).cos();
         breathe(&mut body, &torso_parts, cfg.breathing_amplitude_m * breath);
         let drift = Isometry3::from_parts(
@@ -254,7 +255,7 @@ pub fn generate(
                 0.03 * (tau * time / 19.0 + drift_phase[2]).sin(),
             ),
         );
-        for v in body.vertices.iter_mut().chain(body.salient.iter_mut()) {
+        for v in body.vertices.iter_mut().chain(body.salient_points.iter_mut()) {
             let p = drift * Point3::from(*v);
             *v = [p.x, p.y, p.z];
         }
@@ -368,7 +369,7 @@ mod tests {
 
     #[test]
     fn breathing_lifts_the_chest_front_only() {
-        let mut body = Mannequin::build(&Mannequin::sample_params(&mut ChaCha8Rng::seed_from_u64(2)));
+        let mut body = Mannequin::build(&Mannequin::sample_params(&mut ChaCha8Rng::seed_from_u64(2))).body;
         let before = body.clone();
         let torso: Vec<u8> = vec![2, 3];
         breathe(&mut body, &torso, 0.008);
@@ -381,11 +382,14 @@ mod tests {
         let max = moved.iter().cloned().fold(0.0, f32::max);
         assert!(max > 0.006 && max <= 0.008 + 1e-6, "peak rise {max}");
         for (i, m) in moved.iter().enumerate() {
-            if !torso.contains(&before.vertex_part[i]) {
+            if !torso.contains(&before.part_of_vertex[i]) {
                 assert_eq!(*m, 0.0, "limbs and head stay");
             }
         }
-        assert!(body.salient[3][2] > before.salient[3][2], "belly point rises");
+        assert!(
+            body.salient_points[3][2] > before.salient_points[3][2],
+            "belly point rises"
+        );
         assert_eq!(MANNEQUIN_PARTS[2], "chest");
     }
 
