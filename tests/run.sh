@@ -46,6 +46,8 @@ step clippy cargo clippy --workspace --all-targets --all-features -- -D warnings
 # --include-ignored: tests that need peers (python-can, cantools, libOpenNI2, ptys) are #[ignore]d for plain
 # `cargo test` on a Rust-only machine and run here, where setup.sh has installed those peers.
 step test cargo test --workspace --all-features -- --include-ignored
+# supine-core against a sysroot with neither std nor alloc (see the script for why this target).
+step nostd bash tests/nostd-check.sh
 for peer in tests/peers/*.sh; do
     [[ -e $peer ]] || continue
     step "peer:$(basename "$peer" .sh)" bash "$peer"

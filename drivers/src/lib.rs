@@ -5,6 +5,7 @@
 
 #[cfg(test)]
 mod c_probe;
+pub mod clock;
 pub mod fault;
 #[cfg(feature = "freenect")]
 pub mod freenect;

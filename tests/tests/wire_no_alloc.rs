@@ -1,10 +1,6 @@
 //! The wire decoders (and encoders) never touch the heap: a counting global allocator watches this thread while
 //! many frames go through the serial, CAN, SLCAN and candump paths, and must see zero allocations.
-// A global allocator is an `unsafe impl` by definition; it only forwards to `System` and counts.
-#![allow(unsafe_code)]
 
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
 use std::fmt::Write;
 
 use supine_core::wire::can::{CanBase, CanFrame};
@@ -14,42 +10,7 @@ use supine_core::wire::serial::MAX_WIRE_LEN;
 use supine_core::wire::slcan::{self, SlcanReader};
 use supine_core::wire::stream::SerialDecoder;
 use supine_core::wire::{can_map, candump, consumer::ArmConsumer};
-
-thread_local! {
-    static WATCHING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-struct Counting;
-
-// SAFETY: every call is forwarded unchanged to the system allocator; the counter is a thread-local Cell with a
-// const initialiser, which needs no allocation and no destructor.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-fn count() {
-    let _ = WATCHING.try_with(|w| {
-        if w.get() {
-            let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
-        }
-    });
-}
+use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -89,7 +50,6 @@ fn decoding_makes_no_heap_allocation() {
         .flat_map(|m| can_map::encode_group(m, CanBase::DEFAULT).unwrap())
         .collect();
 
-    WATCHING.with(|w| w.set(true));
     let mut serial_msgs = 0usize;
     let mut can_msgs = 0usize;
     let mut slcan_msgs = 0usize;
@@ -101,40 +61,40 @@ fn decoding_makes_no_heap_allocation() {
     let mut slcan_r = CanReassembler::new(CanBase::DEFAULT);
     let mut candump_r = CanReassembler::new(CanBase::DEFAULT);
     let mut reader: SlcanReader = SlcanReader::new();
-    for _ in 0..ROUNDS {
-        for chunk in serial.chunks(13) {
-            decoder.feed_all(chunk, |_| serial_msgs += 1);
-            consumer.feed(chunk);
-        }
-        for f in &frames {
-            if let Some(Ok(_)) = reassembler.push(f) {
-                can_msgs += 1;
+    let ((), allocations) = count_allocations(|| {
+        for _ in 0..ROUNDS {
+            for chunk in serial.chunks(13) {
+                decoder.feed_all(chunk, |_| serial_msgs += 1);
+                consumer.feed(chunk);
             }
-            let mut line = [0u8; slcan::MAX_LINE];
-            let n = slcan::encode(f, &mut line).unwrap_or(0);
-            for &b in &line[..n] {
-                if let Some(Ok(p)) = reader.push(b)
-                    && let Some(Ok(_)) = slcan_r.push(&p.frame)
+            for f in &frames {
+                if let Some(Ok(_)) = reassembler.push(f) {
+                    can_msgs += 1;
+                }
+                let mut line = [0u8; slcan::MAX_LINE];
+                let n = slcan::encode(f, &mut line).unwrap_or(0);
+                for &b in &line[..n] {
+                    if let Some(Ok(p)) = reader.push(b)
+                        && let Some(Ok(_)) = slcan_r.push(&p.frame)
+                    {
+                        slcan_msgs += 1;
+                    }
+                }
+                let mut text = StackText { buf: [0; 96], len: 0 };
+                if candump::encode(f, 1_234_567_890, "can0", &mut text).is_ok()
+                    && let Ok(l) = candump::parse(&text.buf[..text.len])
+                    && let Some(Ok(_)) = candump_r.push(&l.frame)
                 {
-                    slcan_msgs += 1;
+                    candump_msgs += 1;
                 }
             }
-            let mut text = StackText { buf: [0; 96], len: 0 };
-            if candump::encode(f, 1_234_567_890, "can0", &mut text).is_ok()
-                && let Ok(l) = candump::parse(&text.buf[..text.len])
-                && let Some(Ok(_)) = candump_r.push(&l.frame)
-            {
-                candump_msgs += 1;
+            for m in &MESSAGES {
+                let mut buf = [0u8; MAX_WIRE_LEN];
+                encoded += usize::from(m.encode_serial(&mut buf).is_ok());
+                encoded += usize::from(can_map::encode_group(m, CanBase::DEFAULT).is_ok());
             }
         }
-        for m in &MESSAGES {
-            let mut buf = [0u8; MAX_WIRE_LEN];
-            encoded += usize::from(m.encode_serial(&mut buf).is_ok());
-            encoded += usize::from(can_map::encode_group(m, CanBase::DEFAULT).is_ok());
-        }
-    }
-    WATCHING.with(|w| w.set(false));
-    let allocations = ALLOCATIONS.with(Cell::get);
+    });
 
     let expected = ROUNDS * MESSAGES.len();
     assert_eq!(
@@ -148,9 +108,5 @@ fn decoding_makes_no_heap_allocation() {
 #[test]
 fn the_counter_does_count() {
     // Guard against a counter that never counts, which would make the test above vacuous.
-    WATCHING.with(|w| w.set(true));
-    let v: Vec<u8> = Vec::with_capacity(std::hint::black_box(32));
-    WATCHING.with(|w| w.set(false));
-    drop(v);
-    assert!(ALLOCATIONS.with(Cell::get) >= 1);
+    assert!(counter_is_installed());
 }

@@ -148,7 +148,6 @@ pub struct Slot {
 pub struct Shared {
     slot: Mutex<Slot>,
     ready: Condvar,
-    epoch: Instant,
 }
 
 /// The outcome of [`Kinect::wait_frame`].
@@ -173,7 +172,7 @@ extern "C" fn depth_callback(dev: *mut FreenectDevice, depth: *mut c_void, _time
         }
         (&*user, std::slice::from_raw_parts(depth as *const u16, PIXELS))
     };
-    let now = shared.epoch.elapsed().as_micros() as u64;
+    let now = crate::clock::MonotonicClock.now_us();
     let mut slot = shared.slot.lock().unwrap_or_else(|p| p.into_inner());
     if slot.back.len() == PIXELS {
         slot.back.copy_from_slice(src);
@@ -255,7 +254,6 @@ impl Kinect {
                 failed: None,
             }),
             ready: Condvar::new(),
-            epoch: Instant::now(),
         });
         // SAFETY: the user pointer stays valid while `shared` lives, which outlasts every callback (see Drop).
         unsafe {
