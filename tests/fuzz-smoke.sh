@@ -35,7 +35,10 @@ for t in "${targets[@]}"; do
     mkdir -p fuzz/target
     echo "fuzz-smoke: running $t for ${secs} s"
     # The outer timeout only guards against a hung run; libFuzzer stops itself after max_total_time.
-    if ! timeout $((secs + 120)) "${fuzz[@]}" run --fuzz-dir fuzz "$t" -- \
+    # Committed seeds (fuzz/seeds/TARGET, where present) join the accumulated corpus as read-only inputs.
+    seeds=()
+    [[ -d fuzz/seeds/$t ]] && seeds=("fuzz/corpus/$t" "fuzz/seeds/$t") && mkdir -p "fuzz/corpus/$t"
+    if ! timeout $((secs + 120)) "${fuzz[@]}" run --fuzz-dir fuzz "$t" "${seeds[@]}" -- \
         -max_total_time="$secs" -print_final_stats=1 2>"$log"; then
         echo "fuzz-smoke: $t FAILED; last lines of $log:" >&2
         tail -40 "$log" >&2

@@ -46,3 +46,17 @@ fn the_demo_recording_loads() {
     );
     assert!(fixtures::load_frames(&fixtures::demo_dir().join("missing.oni"), 1).is_err());
 }
+
+/// The fuzz seed of the model-file target is the tiny fixture, byte for byte: a golden file of the container and
+/// body-model layouts, and the starting point from which the fuzzer reaches the semantic checks.
+/// `SUPINE_BLESS=1` rewrites it after a deliberate format change.
+#[test]
+fn the_model_file_fuzz_seed_is_the_fixture() {
+    let path = fixtures::workspace_root().join("fuzz/seeds/model_file/tiny_body.smf");
+    let bytes = fixtures::tiny_body_model();
+    if std::env::var_os("SUPINE_BLESS").is_some() {
+        std::fs::write(&path, &bytes).unwrap();
+    }
+    let seed = std::fs::read(&path).expect("the committed fuzz seed");
+    assert_eq!(seed, bytes, "{} differs from the fixture", path.display());
+}
