@@ -4,7 +4,9 @@
 //! Every point lives in a named frame (`camera`, `robot_base`, `torso`, `body`, `bed`; see [`crate::camera`]) and
 //! every rigid transform is an [`Isometry3`] named `a_from_b`: it maps coordinates in frame `b` to frame `a`, so
 //! `a_from_c = a_from_b * b_from_c` reads left to right. These are plain aliases, so nalgebra's whole API applies;
-//! all of them are `Copy` and live on the stack. A plane test costs four multiply-adds per point.
+//! all of them are `Copy` and live on the stack. Bulk point buffers (mesh vertices, body-model rows) stay `[f32; 3]`
+//! arrays, the flat layout of the model files and the renderer (the same memory as a [`Point3`]; convert with
+//! `Point3::from`). A plane test costs four multiply-adds per point.
 
 use serde::{Deserialize, Serialize};
 
