@@ -9,6 +9,7 @@
 //! - [`time`]: [`time::Timestamp`] (µs, 48 bits) and the [`time::Clock`] the tracker takes.
 //! - [`salient`]: the six salient points, one enum for the model, the forest, the wire and the reports.
 //! - [`body_model::SHAPE_COMPONENTS`]: the shape size (20); [`body_model::BodyPart`] and its wire region.
+//! - [`rng`]: the seeded generator (SplitMix64) behind sampling, RANSAC and fault schedules.
 //! - [`error`]: small errors shared by several modules ([`error::RangeError`], [`error::BufferLenError`]).
 //!
 //! Layers:
@@ -33,6 +34,8 @@
 //! `models/src/eval`).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::std_instead_of_core))]
+#[cfg(test)]
+extern crate std;
 
 pub mod body_model;
 pub mod camera;
@@ -43,6 +46,8 @@ pub mod error;
 pub mod fixture;
 pub mod geometry;
 pub mod model_file;
+pub mod planes;
+pub mod rng;
 pub mod salient;
 pub mod time;
 pub mod wire;

@@ -16,7 +16,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 
 use crate::source::{DepthSource, SourceError, SourceErrorKind};
-use crate::splitmix::SplitMix64;
+use supine_core::rng::SplitMix64;
 
 /// Which faults to inject and how often (probabilities per call, 0..=1).
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -16,7 +16,6 @@ pub mod oni;
 pub mod openni2;
 pub mod recording;
 pub mod source;
-mod splitmix;
 pub mod v4l2;
 
 pub use source::{DepthSource, SourceError, SourceErrorKind, SourceSpec};

@@ -13,7 +13,7 @@ use super::codec::Framing;
 use super::error::LinkError;
 use super::port::LinkState;
 use super::{Encoded, Link, LinkCounters, Tamper};
-use crate::splitmix::SplitMix64;
+use supine_core::rng::SplitMix64;
 
 /// What to inject, with probabilities in 0..=1.
 #[derive(Clone, Debug, Default, PartialEq)]

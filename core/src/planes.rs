@@ -1,0 +1,692 @@
+//! The scene part of the init phase (paper §3.1): the floor and mattress planes from one depth frame (RANSAC on a
+//! subsampled point cloud, then least squares on the inliers), the bed's long axis and visible extent, and from them
+//! the [`VolumeOfInterest`] whose [`VolumeOfInterest::keeps`] is the tracker's per-frame clip: what lies above the
+//! mattress inside the bed's footprint (the patient and, where present, the robot arm), not bed or floor.
+//!
+//! The init phase requires the patient on the bed and no other object in view. The mattress is the plane with the
+//! patient on it: when the floor is visible too it is the parallel plane nearer the camera; when one plane is found
+//! alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the points
+//! lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not give.
+//! A raised head section is the largest plane tilted from up that rises above the mattress; the clip keeps only
+//! what lies above it as well. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without
+//! either, the largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
+//!
+//! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
+//! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once).
+//! The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller lends the scratch.
+
+use crate::camera::Intrinsics;
+use crate::depth::DepthFrame;
+use crate::geometry::{Isometry3, Matrix3, Plane, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use crate::rng::SplitMix64;
+
+/// Settings of the plane search (the defaults suit a Kinect v1 1-3 m from the bed).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlaneConfig {
+    /// Sample every `stride`-th pixel of every `stride`-th row.
+    pub stride: u16,
+    /// RANSAC hypotheses per plane.
+    pub iterations: u32,
+    /// A point within this distance of a plane is an inlier, metres (Kinect v1 noise is 5-10 mm at 2 m).
+    pub inlier_m: f32,
+    /// A plane must hold at least this share of the sampled points.
+    pub min_inlier_fraction: f32,
+    /// Two planes are parallel (floor and mattress) when their normals agree within this angle, degrees.
+    pub parallel_deg: f32,
+    /// Points this far above the mattress and no higher than [`PlaneConfig::max_height_m`] are the patient.
+    pub min_height_m: f32,
+    /// Highest point above the mattress that belongs to the volume of interest, metres.
+    pub max_height_m: f32,
+    /// Margin added around the visible mattress footprint, metres.
+    pub margin_m: f32,
+    /// Seed of the hypothesis sampler (the result is deterministic for a seed).
+    pub seed: u64,
+}
+
+impl Default for PlaneConfig {
+    fn default() -> Self {
+        PlaneConfig {
+            stride: 6,
+            iterations: 256,
+            inlier_m: 0.012,
+            min_inlier_fraction: 0.04,
+            parallel_deg: 6.0,
+            min_height_m: 0.02,
+            max_height_m: 0.8,
+            margin_m: 0.05,
+            seed: 0x5EED_B0ED,
+        }
+    }
+}
+
+/// Points a scratch buffer must hold for a `width` x `height` frame at `stride`.
+pub const fn scratch_points(width: usize, height: usize, stride: usize) -> usize {
+    width.div_ceil(stride) * height.div_ceil(stride)
+}
+
+/// Why no bed was found.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum PlaneError {
+    /// Too few pixels with depth in range to look for planes.
+    TooFewPoints {
+        /// Points sampled.
+        found: usize,
+    },
+    /// No plane holds enough points (nothing flat in view, or the view is cluttered).
+    NoPlane,
+    /// Planes were found but none has a patient-sized object lying on it.
+    NoPatientOnBed,
+    /// The scratch buffers are smaller than [`scratch_points`] for this frame.
+    ScratchTooSmall {
+        /// Points needed.
+        needed: usize,
+    },
+}
+
+impl core::fmt::Display for PlaneError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            PlaneError::TooFewPoints { found } => {
+                write!(
+                    f,
+                    "only {found} pixels with depth in range: cannot look for the bed"
+                )
+            }
+            PlaneError::NoPlane => f.write_str("no plane large enough for a mattress or floor in view"),
+            PlaneError::NoPatientOnBed => f.write_str("planes found, but no patient lies on any of them"),
+            PlaneError::ScratchTooSmall { needed } => {
+                write!(f, "plane scratch holds fewer than {needed} points")
+            }
+        }
+    }
+}
+
+impl core::error::Error for PlaneError {}
+
+/// The bed as the init phase found it, in the `camera` frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BedScene {
+    /// The mattress top, normal toward the camera.
+    pub mattress: Plane,
+    /// The floor, when it is in view.
+    pub floor: Option<Plane>,
+    /// The bed's raised head section, when it is raised and in view (normal toward the camera).
+    pub head_section: Option<Plane>,
+    /// The volume of interest derived from the mattress, its long axis and its visible extent.
+    pub volume: VolumeOfInterest,
+    /// Sampled points on the mattress plane.
+    pub mattress_inliers: u32,
+    /// Sampled points on the floor plane (0 without a floor).
+    pub floor_inliers: u32,
+    /// Sampled points lying on the mattress (the patient).
+    pub patient_points: u32,
+}
+
+/// A box in the bed frame (origin on the mattress at the centre of its visible part, x across, y along the bed,
+/// z up from the mattress): the per-frame clip.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct VolumeOfInterest {
+    /// Rigid transform from the camera into the bed frame.
+    pub bed_from_camera: Isometry3,
+    /// Lower corner, bed frame, metres.
+    pub min: [f32; 3],
+    /// Upper corner, bed frame, metres.
+    pub max: [f32; 3],
+    /// A raised head section (`camera` frame): kept points lie at least `min[2]` above it too.
+    pub head_section: Option<Plane>,
+}
+
+impl VolumeOfInterest {
+    /// Whether a `camera`-frame point lies in the volume (above the mattress and the head section, within the bed's
+    /// footprint).
+    pub fn keeps(&self, p_camera: &Point3) -> bool {
+        let q = self.bed_from_camera * p_camera;
+        (0..3).all(|i| q[i] >= self.min[i] && q[i] <= self.max[i])
+            && self
+                .head_section
+                .is_none_or(|hs| hs.signed_distance(p_camera) >= self.min[2])
+    }
+
+    /// Whether pixel (u, v) with depth `mm` is kept (0 = no depth is never kept).
+    pub fn keeps_pixel(&self, k: &Intrinsics, u: u16, v: u16, mm: u16) -> bool {
+        mm != 0 && self.keeps(&k.unproject(u as f32, v as f32, mm as f32 * 0.001))
+    }
+}
+
+/// Depth accepted as a point for the search, metres (the Kinect v1's working range).
+const DEPTH_RANGE_M: (f32, f32) = (0.4, 6.0);
+/// Label of a sampled point not (yet) on any plane.
+const FREE: u8 = 0;
+/// Most planes searched for (floor, mattress, head section, the flat top of what lies on it, a wall).
+const MAX_PLANES: usize = 5;
+/// A plane this close to up is horizontal, degrees.
+const HORIZONTAL_DEG: f32 = 10.0;
+/// Height band above the mattress in which a raised head section meets it (its hinge), metres.
+const HINGE_BAND_M: f32 = 0.03;
+/// A head section's normal lies within this angle of the plane of up and the bed's long axis, degrees.
+const HINGE_AXIS_DEG: f32 = 8.0;
+/// The steepest head section looked for, degrees from horizontal.
+const MAX_HEAD_RAISE_DEG: f32 = 70.0;
+/// Height range of a mattress above the floor, metres (hospital and home beds).
+const FLOOR_TO_MATTRESS_M: (f32, f32) = (0.4, 1.2);
+
+/// Find the bed in `frame`: planes, long axis, extent, volume of interest. `up_camera` is the direction of up in the
+/// camera frame when known (from `robot_base_from_camera`); without it, up is the floor's normal when the floor is in
+/// view, else the largest plane's. `points` and `labels` are scratch of at least [`scratch_points`] entries.
+pub fn estimate_bed(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    cfg: &PlaneConfig,
+    up_camera: Option<&Vector3>,
+    points: &mut [Point3],
+    labels: &mut [u8],
+) -> Result<BedScene, PlaneError> {
+    let stride = cfg.stride.max(1) as usize;
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let needed = scratch_points(w, h, stride);
+    if points.len() < needed || labels.len() < needed {
+        return Err(PlaneError::ScratchTooSmall { needed });
+    }
+    let mut n = 0;
+    let depth = frame.depth_mm();
+    for v in (0..h).step_by(stride) {
+        for u in (0..w).step_by(stride) {
+            let z = depth[v * w + u] as f32 * 0.001;
+            if z >= DEPTH_RANGE_M.0 && z <= DEPTH_RANGE_M.1 {
+                points[n] = k.unproject(u as f32, v as f32, z);
+                n += 1;
+            }
+        }
+    }
+    let points = &points[..n];
+    let labels = &mut labels[..n];
+    labels.fill(FREE);
+    let min_inliers = ((n as f32 * cfg.min_inlier_fraction) as usize).max(50);
+    if n < 3 * min_inliers.max(100) / 2 {
+        return Err(PlaneError::TooFewPoints { found: n });
+    }
+    let mut rng = SplitMix64::new(cfg.seed);
+    // The largest planes, labelled 1, 2, ... in the order found: floor, mattress, a raised head section, the flat top
+    // of whatever lies on the mattress, a wall.
+    // One slot more than the greedy search fills: the targeted mattress search below may add a plane.
+    let mut found = [(Plane::through(Vector3::zeros(), Vector3::z()), 0usize); MAX_PLANES + 1];
+    let mut count = 0;
+    while count < MAX_PLANES {
+        let Some(p) = ransac(points, labels, cfg, &mut rng, &|_| true) else {
+            break;
+        };
+        let m = mark(points, labels, &p, cfg.inlier_m, count as u8 + 1);
+        if m < min_inliers {
+            // Unmark: these points stay free for the patient test below.
+            labels
+                .iter_mut()
+                .filter(|l| **l == count as u8 + 1)
+                .for_each(|l| *l = FREE);
+            break;
+        }
+        found[count] = (p, m);
+        count += 1;
+    }
+    if count == 0 {
+        return Err(PlaneError::NoPlane);
+    }
+    let cos_par = libm::cosf(cfg.parallel_deg.to_radians());
+    let parallel = |a: &Plane, b: &Plane| a.normal().dot(&b.normal()) >= cos_par;
+    // Offset of `b` above `a` along `a`'s normal (both face the camera, so the nearer plane has the smaller d).
+    let above = |a: &Plane, b: &Plane| a.d - b.d;
+    let bed_height = |f: &Plane, b: &Plane| {
+        parallel(f, b) && (FLOOR_TO_MATTRESS_M.0..FLOOR_TO_MATTRESS_M.1).contains(&above(f, b))
+    };
+    // A patient covers most of the mattress, so its visible band may be too small for the search above: when the
+    // largest horizontal-looking plane has no plane a bed's height above it, look for one there with a lower bar.
+    let has_bed_above = |f: &Plane, found: &[(Plane, usize)]| found.iter().any(|(b, _)| bed_height(f, b));
+    {
+        let lowest = found[..count]
+            .iter()
+            .filter(|(p, _)| up_camera.is_none_or(|u| p.normal().dot(&u.normalize()) >= cos_par))
+            .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
+            .map(|(p, _)| *p);
+        if let Some(f) = lowest.filter(|f| !has_bed_above(f, &found[..count])) {
+            // The normal is known (the floor's), so only the height is searched: the densest 1 cm layer of points
+            // a bed's height above it, then least squares.
+            let p = densest_layer(points, labels, &f, FLOOR_TO_MATTRESS_M)
+                .and_then(|p| refine(points, labels, &p, cfg.inlier_m))
+                .filter(|p| bed_height(&f, p));
+            if let Some(p) = p {
+                let m = mark(points, labels, &p, cfg.inlier_m, count as u8 + 1);
+                if m >= min_inliers / 4 {
+                    found[count] = (p, m);
+                    count += 1;
+                } else {
+                    labels
+                        .iter_mut()
+                        .filter(|l| **l == count as u8 + 1)
+                        .for_each(|l| *l = FREE);
+                }
+            }
+        }
+    }
+    let found = &found[..count];
+    // The floor: the farthest plane with a parallel one a bed's height nearer. Up is its normal, else the caller's,
+    // else the largest plane's (a view in which the flat mattress dominates).
+    let floor = found
+        .iter()
+        .filter(|(f, _)| has_bed_above(f, found))
+        .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
+        .copied();
+    let up = match (floor, up_camera) {
+        (Some((f, _)), _) => f.normal(),
+        (None, Some(u)) => u.normalize(),
+        (None, None) => found[0].0.normal(),
+    };
+    let cos_up = libm::cosf(HORIZONTAL_DEG.to_radians());
+    // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
+    // in depth layers a few centimetres apart, which may be found as planes of their own).
+    let (mattress, mattress_n) = found
+        .iter()
+        .filter(|(p, _)| p.normal().dot(&up) >= cos_up && floor.is_none_or(|(f, _)| bed_height(&f, p)))
+        .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
+        .copied()
+        .ok_or(PlaneError::NoPlane)?;
+    let mattress_label = found
+        .iter()
+        .position(|(p, _)| *p == mattress)
+        .map_or(FREE, |i| i as u8 + 1);
+    // A raised head section: tilted from up about the hinge line, which runs across the bed, so its normal lies in
+    // the plane of up and the bed's long axis (taken here from everything lying on the mattress); rising above the
+    // mattress from the hinge.
+    let coarse_across = {
+        let on = |p: &Point3| {
+            let h = mattress.signed_distance(p);
+            h > cfg.min_height_m && h < cfg.max_height_m
+        };
+        long_axis(points, &mattress.normal(), &on).cross(&mattress.normal())
+    };
+    let sin_axis = libm::sinf(HINGE_AXIS_DEG.to_radians());
+    let head_section = found
+        .iter()
+        .filter(|(p, _)| libm::fabsf(p.normal().dot(&coarse_across)) < sin_axis)
+        .filter(|(p, _)| {
+            let c = p.normal().dot(&up);
+            c < cos_up && c > libm::cosf(MAX_HEAD_RAISE_DEG.to_radians())
+        })
+        .filter(|(p, _)| {
+            // It starts at the mattress (the hinge) and rises: some of its points lie within a few centimetres of the
+            // mattress, none far below it. A body surface that happens to be flat and tilted starts higher.
+            let (mut n, mut at_hinge, mut below) = (0u32, 0u32, 0u32);
+            for q in points {
+                if libm::fabsf(p.signed_distance(q)) < cfg.inlier_m {
+                    let h = mattress.signed_distance(q);
+                    n += 1;
+                    at_hinge += (h < HINGE_BAND_M) as u32;
+                    below += (h < -HINGE_BAND_M) as u32;
+                }
+            }
+            n > 0 && at_hinge * 50 >= n && below * 20 < n
+        })
+        .max_by_key(|(_, m)| *m)
+        .map(|(p, _)| *p);
+    let floor_n = floor.map_or(0, |(_, n)| n);
+    let floor = floor.map(|(f, _)| f);
+    let patient = |p: &Point3| {
+        let hgt = mattress.signed_distance(p);
+        hgt > cfg.min_height_m
+            && hgt < cfg.max_height_m
+            && head_section.is_none_or(|hs| hs.signed_distance(p) > cfg.min_height_m)
+    };
+    let patient_n = points.iter().filter(|p| patient(p)).count();
+    if patient_n < min_inliers / 2 {
+        return Err(PlaneError::NoPatientOnBed);
+    }
+    // A lone plane with a patient on it could still be the floor with the bed standing on it: then most of what is
+    // above it is higher than a body lying on a mattress is thick.
+    let high = points
+        .iter()
+        .filter(|p| {
+            let hgt = mattress.signed_distance(p);
+            hgt >= cfg.max_height_m && hgt < 2.0
+        })
+        .count();
+    if floor.is_none() && high > patient_n {
+        return Err(PlaneError::NoPatientOnBed);
+    }
+
+    // Bed frame: z the mattress normal, y the patient's principal axis on the mattress, origin at the mattress
+    // inliers' centroid projected on the plane.
+    let nz = mattress.normal();
+    let along = long_axis(points, &nz, &patient);
+    let across = along.cross(&nz);
+    let mut centroid = Vector3::zeros();
+    let mut count = 0.0f32;
+    for (p, &l) in points.iter().zip(labels.iter()) {
+        if l == mattress_label {
+            centroid += p.coords;
+            count += 1.0;
+        }
+    }
+    let centroid = centroid / count.max(1.0);
+    let origin = centroid - nz * mattress.signed_distance(&Point3::from(centroid));
+    let camera_from_bed = Isometry3::from_parts(
+        Translation3::from(origin),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
+            across, along, nz,
+        ]))),
+    );
+    let bed_from_camera = camera_from_bed.inverse();
+    let mut lo = [f32::INFINITY; 2];
+    let mut hi = [f32::NEG_INFINITY; 2];
+    for (p, &l) in points.iter().zip(labels.iter()) {
+        if l == mattress_label || patient(p) {
+            let q = bed_from_camera * p;
+            for i in 0..2 {
+                lo[i] = lo[i].min(q[i]);
+                hi[i] = hi[i].max(q[i]);
+            }
+        }
+    }
+    let volume = VolumeOfInterest {
+        bed_from_camera,
+        min: [lo[0] - cfg.margin_m, lo[1] - cfg.margin_m, cfg.min_height_m],
+        max: [hi[0] + cfg.margin_m, hi[1] + cfg.margin_m, cfg.max_height_m],
+        head_section,
+    };
+    Ok(BedScene {
+        mattress,
+        floor,
+        head_section,
+        volume,
+        mattress_inliers: mattress_n as u32,
+        floor_inliers: floor_n as u32,
+        patient_points: patient_n as u32,
+    })
+}
+
+/// The principal direction, in the plane normal to `nz`, of the points `keep` accepts (a lying patient's long axis).
+fn long_axis(points: &[Point3], nz: &Vector3, keep: &dyn Fn(&Point3) -> bool) -> Vector3 {
+    let ex0 = {
+        let a = Vector3::x() - nz * nz.x;
+        if a.norm() > 1e-3 {
+            a.normalize()
+        } else {
+            (Vector3::y() - nz * nz.y).normalize()
+        }
+    };
+    let ey0 = nz.cross(&ex0);
+    let (mut n, mut mean) = (0.0f64, [0.0f64; 2]);
+    for p in points.iter().filter(|p| keep(p)) {
+        mean[0] += ex0.dot(&p.coords) as f64;
+        mean[1] += ey0.dot(&p.coords) as f64;
+        n += 1.0;
+    }
+    let mean = [mean[0] / n.max(1.0), mean[1] / n.max(1.0)];
+    let mut cov = [0.0f64; 3];
+    for p in points.iter().filter(|p| keep(p)) {
+        let (a, b) = (
+            ex0.dot(&p.coords) as f64 - mean[0],
+            ey0.dot(&p.coords) as f64 - mean[1],
+        );
+        cov[0] += a * a;
+        cov[1] += a * b;
+        cov[2] += b * b;
+    }
+    // Major axis of the 2x2 covariance [[c0, c1], [c1, c2]].
+    let angle = 0.5 * libm::atan2(2.0 * cov[1], cov[0] - cov[2]);
+    (ex0 * libm::cos(angle) as f32 + ey0 * libm::sin(angle) as f32).normalize()
+}
+
+/// The plane through three points, normal toward the camera (the origin); `None` when they are (nearly) collinear.
+fn plane_through(a: &Point3, b: &Point3, c: &Point3) -> Option<Plane> {
+    let n = (b - a).cross(&(c - a));
+    let len = n.norm();
+    if len < 1e-6 {
+        return None;
+    }
+    let mut n = n / len;
+    if -n.dot(&a.coords) < 0.0 {
+        n = -n;
+    }
+    Some(Plane::through(a.coords, n))
+}
+
+/// The best plane over the free points by RANSAC, refined by least squares; only hypotheses (and a result) that
+/// `accept` takes count.
+fn ransac(
+    points: &[Point3],
+    labels: &[u8],
+    cfg: &PlaneConfig,
+    rng: &mut SplitMix64,
+    accept: &dyn Fn(&Plane) -> bool,
+) -> Option<Plane> {
+    let n = points.len();
+    let mut best: Option<(Plane, usize)> = None;
+    // Score on a fixed subset of the points: the ranking of hypotheses needs no more, the refinement uses all.
+    let step = (n / 2048).max(1);
+    for _ in 0..cfg.iterations {
+        let pick = |rng: &mut SplitMix64| {
+            for _ in 0..16 {
+                let i = rng.below(n);
+                if labels[i] == FREE {
+                    return Some(i);
+                }
+            }
+            None
+        };
+        let (Some(i), Some(j), Some(l)) = (pick(rng), pick(rng), pick(rng)) else {
+            continue;
+        };
+        let Some(p) = plane_through(&points[i], &points[j], &points[l]) else {
+            continue;
+        };
+        if !accept(&p) {
+            continue;
+        }
+        let score = (0..n)
+            .step_by(step)
+            .filter(|&i| labels[i] == FREE && libm::fabsf(p.signed_distance(&points[i])) < cfg.inlier_m)
+            .count();
+        if best.is_none_or(|(_, s)| score > s) {
+            best = Some((p, score));
+        }
+    }
+    let (mut plane, _) = best?;
+    for _ in 0..2 {
+        plane = refine(points, labels, &plane, cfg.inlier_m)?;
+    }
+    accept(&plane).then_some(plane)
+}
+
+/// The plane parallel to `base` through the densest 1 cm layer of free points between `range` metres above it.
+fn densest_layer(points: &[Point3], labels: &[u8], base: &Plane, range: (f32, f32)) -> Option<Plane> {
+    const BINS: usize = 128;
+    let bin = (range.1 - range.0) / BINS as f32;
+    let mut hist = [0u32; BINS];
+    for (p, &l) in points.iter().zip(labels) {
+        let h = base.signed_distance(p) - range.0;
+        if l == FREE && h >= 0.0 && h < range.1 - range.0 {
+            hist[((h / bin) as usize).min(BINS - 1)] += 1;
+        }
+    }
+    // Two neighbouring bins: a layer straddling a bin edge still counts whole.
+    let best = (0..BINS - 1).max_by_key(|&i| hist[i] + hist[i + 1])?;
+    if hist[best] + hist[best + 1] == 0 {
+        return None;
+    }
+    let h = range.0 + (best + 1) as f32 * bin;
+    Some(Plane {
+        normal: base.normal,
+        d: base.d - h,
+    })
+}
+
+/// Least-squares plane (centroid and the smallest principal direction) of the free points near `plane`.
+fn refine(points: &[Point3], labels: &[u8], plane: &Plane, inlier_m: f32) -> Option<Plane> {
+    let near = |i: usize| labels[i] == FREE && libm::fabsf(plane.signed_distance(&points[i])) < inlier_m;
+    let mut sum = Vector3::zeros();
+    let mut count = 0usize;
+    for i in (0..points.len()).filter(|&i| near(i)) {
+        sum += points[i].coords;
+        count += 1;
+    }
+    if count < 3 {
+        return None;
+    }
+    let c = sum / count as f32;
+    let mut cov = Matrix3::zeros();
+    for i in (0..points.len()).filter(|&i| near(i)) {
+        let d = points[i].coords - c;
+        cov += d * d.transpose();
+    }
+    let eig = cov.symmetric_eigen();
+    let k = eig.eigenvalues.imin();
+    let mut nrm: Vector3 = eig.eigenvectors.column(k).into_owned();
+    if nrm.dot(&plane.normal()) < 0.0 {
+        nrm = -nrm;
+    }
+    Some(Plane::through(c, nrm.normalize()))
+}
+
+/// Label the free points within `inlier_m` of `plane` with `label`; returns how many.
+fn mark(points: &[Point3], labels: &mut [u8], plane: &Plane, inlier_m: f32, label: u8) -> usize {
+    let mut m = 0;
+    for (p, l) in points.iter().zip(labels.iter_mut()) {
+        if *l == FREE && libm::fabsf(plane.signed_distance(p)) < inlier_m {
+            *l = label;
+            m += 1;
+        }
+    }
+    m
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+    use crate::depth::{HEIGHT, PIXELS, WIDTH};
+    use crate::time::Timestamp;
+    use std::vec;
+
+    /// A camera 1.4 m above a mattress looking down at 25° from vertical, the floor 0.55 m below the mattress, a
+    /// 0.5 x 1.6 x 0.22 m "patient" box on the mattress along the bed; depth by ray casting, no noise.
+    fn scene() -> (vec::Vec<u16>, Isometry3, Plane, Plane) {
+        let k = Intrinsics::KINECT_V1;
+        // World: z up, mattress top z = 0, floor z = -0.55, bed along world y.
+        let tilt = 25f32.to_radians();
+        let eye = Vector3::new(0.0, -1.4 * libm::sinf(tilt), 1.4 * libm::cosf(tilt));
+        let fwd = (-eye).normalize();
+        let right = fwd.cross(&Vector3::z()).normalize();
+        let down = fwd.cross(&right);
+        let world_from_camera = Isometry3::from_parts(
+            Translation3::from(eye),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(
+                &[right, down, fwd],
+            ))),
+        );
+        let camera_from_world = world_from_camera.inverse();
+        let mut depth = vec![0u16; PIXELS];
+        for v in 0..HEIGHT {
+            for u in 0..WIDTH {
+                let ray_c = k.unproject(u as f32, v as f32, 1.0).coords;
+                let ray = world_from_camera.rotation * ray_c;
+                let mut best = f32::INFINITY;
+                // Horizontal planes: mattress (within its footprint), floor, box top.
+                let mut hit = |z: f32, inside: &dyn Fn(Vector3) -> bool| {
+                    if ray.z.abs() > 1e-6 {
+                        let t = (z - eye.z) / ray.z;
+                        let p = eye + ray * t;
+                        if t > 0.0 && t < best && inside(p) {
+                            best = t;
+                        }
+                    }
+                };
+                hit(0.22, &|p| p.x.abs() < 0.25 && p.y.abs() < 0.8);
+                hit(0.0, &|p| p.x.abs() < 0.48 && p.y.abs() < 1.0);
+                hit(-0.55, &|_| true);
+                if best.is_finite() {
+                    // Depth is along the optical axis: t along a ray with unit z in the camera frame.
+                    depth[v * WIDTH + u] = (best * 1000.0).round() as u16;
+                }
+            }
+        }
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
+        let floor =
+            Plane::through(Vector3::new(0.0, 0.0, -0.55), Vector3::z()).transformed(&camera_from_world);
+        (depth, camera_from_world, mattress, floor)
+    }
+
+    fn scratch() -> (vec::Vec<Point3>, vec::Vec<u8>) {
+        let n = scratch_points(WIDTH, HEIGHT, 6);
+        (vec![Point3::origin(); n], vec![0u8; n])
+    }
+
+    #[test]
+    fn finds_mattress_floor_axis_and_clips_the_patient() {
+        let (depth, camera_from_world, mattress, floor) = scene();
+        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
+        let k = Intrinsics::KINECT_V1;
+        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), None, &mut pts, &mut lab).unwrap();
+        let angle = |a: &Plane, b: &Plane| libm::acosf(a.normal().dot(&b.normal()).min(1.0)).to_degrees();
+        assert!(
+            angle(&bed.mattress, &mattress) < 0.2,
+            "mattress normal off by {}°",
+            angle(&bed.mattress, &mattress)
+        );
+        assert!(
+            (bed.mattress.d - mattress.d).abs() < 0.003,
+            "mattress offset {} vs {}",
+            bed.mattress.d,
+            mattress.d
+        );
+        let f = bed.floor.expect("the floor is in view");
+        assert!(
+            angle(&f, &floor) < 0.3 && (f.d - floor.d).abs() < 0.005,
+            "floor {f:?} vs {floor:?}"
+        );
+        // The long axis is the world y axis (the box's long side), up to sign.
+        let world_from_camera = camera_from_world.inverse();
+        let along =
+            world_from_camera.rotation * (bed.volume.bed_from_camera.inverse().rotation * Vector3::y());
+        assert!(along.y.abs() > 0.99, "long axis {along:?}");
+        // The clip keeps the box top and rejects the mattress and the floor.
+        let world = |p: Vector3| camera_from_world * Point3::from(p);
+        assert!(bed.volume.keeps(&world(Vector3::new(0.1, 0.3, 0.22))));
+        assert!(!bed.volume.keeps(&world(Vector3::new(0.4, 0.3, 0.0))));
+        assert!(!bed.volume.keeps(&world(Vector3::new(0.1, 0.3, -0.55))));
+        assert!(!bed.volume.keeps(&world(Vector3::new(0.1, 0.3, 1.0))));
+        // Deterministic for the seed.
+        let again = estimate_bed(&frame, &k, &PlaneConfig::default(), None, &mut pts, &mut lab).unwrap();
+        assert_eq!(again, bed);
+    }
+
+    #[test]
+    fn empty_or_flat_frames_are_errors() {
+        let k = Intrinsics::KINECT_V1;
+        let (mut pts, mut lab) = scratch();
+        let empty = vec![0u16; PIXELS];
+        let frame = DepthFrame::new(&empty, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        assert!(matches!(
+            estimate_bed(&frame, &k, &PlaneConfig::default(), None, &mut pts, &mut lab),
+            Err(PlaneError::TooFewPoints { .. })
+        ));
+        // A wall 2 m away: one plane, nothing on it.
+        let wall = vec![2000u16; PIXELS];
+        let frame = DepthFrame::new(&wall, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        assert_eq!(
+            estimate_bed(&frame, &k, &PlaneConfig::default(), None, &mut pts, &mut lab),
+            Err(PlaneError::NoPatientOnBed)
+        );
+        assert!(matches!(
+            estimate_bed(
+                &frame,
+                &k,
+                &PlaneConfig::default(),
+                None,
+                &mut pts[..10],
+                &mut lab
+            ),
+            Err(PlaneError::ScratchTooSmall { .. })
+        ));
+    }
+}
