@@ -24,10 +24,11 @@
 //! Where the tracker's parts go as they land (each a module of its own, named after what it holds):
 //! - `forest/`: the joint forest's model-file view, depth-difference features, inference, weighted mean-shift.
 //! - `shape/`: canonical view, masked subspace projection (Eq. 1), shape regression forest (reusing `forest`).
-//! - `planes`: RANSAC floor and mattress planes, the volume of interest, clipping.
+//! - [`planes`]: RANSAC floor and mattress planes, the volume of interest, clipping (the init phase's scene part).
+//! - [`torso`]: the `torso` frame from the salient points and the shaped torso surface (vertices, normals, regions).
 //! - `icp`: projective point-to-plane ICP with fixed iterations; `fit`: alternating rigid ICP and shape fitting
 //!   (Eq. 7).
-//! - `probe`: probe mapping onto the torso surface (tip, nearest point, normal, signed distance, region).
+//! - [`probe`]: probe mapping onto the torso surface (tip, nearest point, normal, signed distance, region).
 //! - `tracker/`: state machine, frame budget, workspace sized at build, `process(frame, arm, clock)`.
 //!
 //! Their trainers, quantisers and evaluations live in `supine-models` (`models/src/forest`, `models/src/shape`,
@@ -47,7 +48,9 @@ pub mod fixture;
 pub mod geometry;
 pub mod model_file;
 pub mod planes;
+pub mod probe;
 pub mod rng;
 pub mod salient;
 pub mod time;
+pub mod torso;
 pub mod wire;

@@ -20,7 +20,7 @@ use crate::scene::body::BodySource;
 use crate::scene::shapes::vertex_normals;
 use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
-use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
@@ -131,20 +131,10 @@ pub struct SequenceSummary {
     pub frames_per_second: f32,
 }
 
-/// Torso frame from the salient points: origin at the hip centre, y toward the shoulder centre, x the patient's left.
+/// Torso frame from the salient points (core's [`supine_core::torso::a_from_torso`]): origin at the hip centre, y
+/// toward the shoulder centre, x the patient's left; identity for degenerate points.
 pub fn torso_pose(salient: &[[f32; 3]; 6]) -> Isometry3<f32> {
-    let s = salient.map(Vector3::from);
-    let hip = (s[4] + s[5]) * 0.5;
-    let shoulder = (s[1] + s[2]) * 0.5;
-    let y = (shoulder - hip).normalize();
-    let left = (s[1] - s[2]) + (s[4] - s[5]);
-    let x = (left - y * left.dot(&y)).normalize();
-    let z = x.cross(&y);
-    let rot =
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
-            x, y, z,
-        ])));
-    Isometry3::from_parts(Translation3::from(hip), rot)
+    supine_core::torso::a_from_torso(&salient.map(Point3::from)).unwrap_or_else(Isometry3::identity)
 }
 
 /// Lift the front of the chest and belly by `rise` metres along the skin normal (back and limbs stay), weighted by a
