@@ -3,12 +3,14 @@
 //! Commands follow the contract in the README (`supine --help`): exit 0 on success, 1 on a runtime failure,
 //! 2 on bad usage; errors name the bad argument or file.
 
+mod config;
 mod demo;
 mod failure;
 mod info;
 mod links;
 mod notify;
 mod record;
+mod run;
 mod wire;
 
 use clap::{Parser, Subcommand};
@@ -29,6 +31,8 @@ struct Cli {
 enum Command {
     /// The main job on the committed synthetic recording: the whole pipeline as far as it is built, then a table.
     Demo(demo::DemoArgs),
+    /// The service: validate its configuration (`--check-config`); the real-time loop lands with the tracker.
+    Run(run::RunArgs),
     /// Record a depth stream to an .oni file (plays in libOpenNI2 and `supine replay`).
     Record(record::RecordArgs),
     /// Show the models, depth devices and links this build and machine offer.
@@ -60,6 +64,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Record(args) => record::run(args),
+        Command::Run(args) => run::run(args),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),
     };
