@@ -10,7 +10,7 @@ pub mod sources;
 pub mod stats;
 
 use serde::Serialize;
-use stats::{ANGLE_BINS_DEG, Counts, DEPTH_BINS_MM, STEP_BANDS_MM, histogram_median};
+use stats::{ANGLE_BINS_DEG, Counts, DEPTH_BINS_MM, STEP_BANDS_MM, histogram_median, hole_width_fit};
 
 /// Relative tolerance of the comparison.
 pub const TOLERANCE: f64 = 0.25;
@@ -47,7 +47,8 @@ pub struct Row {
     pub synthetic: Option<f64>,
     /// Synthetic relative to real, minus one.
     pub relative_error: Option<f64>,
-    /// Within 25 % of the real value or inside the real spread (`None` where either side lacks it).
+    /// Within 25 % of the real value or inside the real spread (`None` where either side lacks it, and for the
+    /// scene statistics, [`SCENE_STATISTICS`]).
     pub close: Option<bool>,
 }
 
@@ -78,6 +79,7 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
     let smooth: u64 = c.smooth_holes.iter().sum();
     let right: u64 = c.edge_holes_near_right.iter().sum();
     let left: u64 = c.edge_holes_near_left.iter().sum();
+    let big = c.big_holes[0] + c.big_holes[1];
     let mut v = vec![
         (
             "smooth_holes_per_1000_px".to_string(),
@@ -92,30 +94,23 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
             some_if(smooth > 0, c.smooth_hole_mean_px()),
         ),
         (
-            "jumps_per_1000_px".into(),
-            some_if(c.valid_px >= 1000, c.jumps_per_kpx()),
-        ),
-        (
             "mixed_px_per_jump".into(),
             some_if(c.jumps > 0, c.mixed_per_jump()),
         ),
         (
-            "edge_holes_per_jump".into(),
-            some_if(c.jumps > 0, c.edge_holes_per_jump()),
+            "big_jumps_with_hole_share".into(),
+            some_if(big + c.big_jumps > 0, c.big_hole_share()),
         ),
         (
-            "edge_holes_near_right_share".into(),
-            some_if(right + left > 0, c.edge_holes_near_right_share()),
-        ),
-        (
-            "edge_hole_median_px_near_right".into(),
-            histogram_median(&c.edge_holes_near_right).map(f64::from),
-        ),
-        (
-            "edge_hole_median_px_near_left".into(),
-            histogram_median(&c.edge_holes_near_left).map(f64::from),
+            "big_jump_holes_near_right_share".into(),
+            some_if(big > 0, c.big_holes_near_right_share()),
         ),
     ];
+    for (side, name) in [(0, "right"), (1, "left")] {
+        let fit = hole_width_fit(&c.hole_fit[side]);
+        v.push((format!("jump_hole_baseline_mm_near_{name}"), fit.map(|f| f.0)));
+        v.push((format!("jump_hole_extra_px_near_{name}"), fit.map(|f| f.1)));
+    }
     for (band, step) in STEP_BANDS_MM.iter().zip(c.steps_mm()) {
         v.push((format!("quantisation_step_mm_at_{band}"), step.map(f64::from)));
     }
@@ -123,8 +118,38 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
     for (i, side) in ["left", "top", "right", "bottom"].iter().enumerate() {
         v.push((format!("registration_border_px_{side}"), border.map(|b| b[i])));
     }
+    // Scene content more than sensor (how many and how large the depth steps are): reported, not judged.
+    v.push((
+        "jumps_per_1000_px".into(),
+        some_if(c.valid_px >= 1000, c.jumps_per_kpx()),
+    ));
+    v.push((
+        "edge_holes_per_jump".into(),
+        some_if(c.jumps > 0, c.edge_holes_per_jump()),
+    ));
+    v.push((
+        "edge_holes_near_right_share".into(),
+        some_if(right + left > 0, c.edge_holes_near_right_share()),
+    ));
+    v.push((
+        "edge_hole_median_px_near_right".into(),
+        histogram_median(&c.edge_holes_near_right).map(f64::from),
+    ));
+    v.push((
+        "edge_hole_median_px_near_left".into(),
+        histogram_median(&c.edge_holes_near_left).map(f64::from),
+    ));
     v
 }
+
+/// Statistics that depend on the scene's content more than on the sensor: shown, not judged.
+pub const SCENE_STATISTICS: [&str; 5] = [
+    "jumps_per_1000_px",
+    "edge_holes_per_jump",
+    "edge_holes_near_right_share",
+    "edge_hole_median_px_near_right",
+    "edge_hole_median_px_near_left",
+];
 
 /// Build one side from per-frame counts.
 pub fn side(source: String, frames: &[Counts]) -> Side {
@@ -180,6 +205,7 @@ pub fn compare(window_mm: [u16; 2], real: Side, synthetic: Side) -> Report {
                 _ => None,
             };
             let close = match (r, s) {
+                _ if SCENE_STATISTICS.contains(&name.as_str()) => None,
                 (Some(r), Some(s)) => Some(
                     (s - r).abs() <= TOLERANCE * r.abs() + 1e-9
                         || spread.is_some_and(|[lo, hi]| (lo..=hi).contains(s)),
@@ -239,6 +265,7 @@ impl Report {
                 match r.close {
                     Some(true) => "yes",
                     Some(false) => "**no**",
+                    None if SCENE_STATISTICS.contains(&r.statistic.as_str()) => "(scene)",
                     None => "–",
                 }
             );

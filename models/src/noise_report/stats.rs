@@ -11,6 +11,11 @@ use supine_core::camera::Intrinsics;
 
 /// A step of more than this between horizontal neighbours is a depth jump (mm).
 pub const JUMP_MM: u16 = 80;
+/// A discontinuity is "big" when its sides differ by at least this in 1/z (1/m): the projector shadow or the
+/// registration hole it casts is then a few pixels wide, so whether a hole appears is a property of the sensor.
+pub const BIG_JUMP_INV_M: f32 = 0.1;
+/// Holes at big jumps longer than this (px) are left out of the width fit (dark objects, not sensor geometry).
+pub const FIT_MAX_HOLE_PX: u32 = 64;
 /// Half-width of the stencil that estimates the surface normal from depth, pixels.
 pub const NORMAL_STEP: usize = 4;
 /// Bins of the hole-length histograms: lengths 1 to 63 px one by one, the last bin 64 px and longer.
@@ -75,6 +80,13 @@ pub struct Counts {
     pub edge_holes_near_left: Vec<u64>,
     /// Depth jumps between valid pixels (directly or through up to two mixed pixels).
     pub jumps: u64,
+    /// Big discontinuities ([`BIG_JUMP_INV_M`]) crossed without a hole (valid to valid).
+    pub big_jumps: u64,
+    /// Big discontinuities with a hole, near side right / left.
+    pub big_holes: [u64; 2],
+    /// Least-squares sums `[n, Σx, Σy, Σx², Σxy]` of hole length y (px) against x = fx·Δ(1/z) (px·m) for big
+    /// holes up to [`FIT_MAX_HOLE_PX`], near side right and left: a shadow is `y = x·baseline + extra`.
+    pub hole_fit: [[f64; 5]; 2],
     /// Mixed pixels found inside those jumps.
     pub mixed_px: u64,
     /// Per [`ANGLE_BINS_DEG`]: `[valid, invalid]` pixels on smooth surfaces.
@@ -121,6 +133,12 @@ impl Counts {
         sum(&mut self.edge_holes_near_right, &other.edge_holes_near_right);
         sum(&mut self.edge_holes_near_left, &other.edge_holes_near_left);
         self.jumps += other.jumps;
+        self.big_jumps += other.big_jumps;
+        self.big_holes[0] += other.big_holes[0];
+        self.big_holes[1] += other.big_holes[1];
+        for (a, b) in self.hole_fit.iter_mut().zip(&other.hole_fit) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
         self.mixed_px += other.mixed_px;
         for (a, b) in self.by_angle.iter_mut().zip(&other.by_angle) {
             a[0] += b[0];
@@ -169,6 +187,17 @@ impl Counts {
         holes as f64 / self.jumps.max(1) as f64
     }
 
+    /// Share of big discontinuities that have a hole.
+    pub fn big_hole_share(&self) -> f64 {
+        let holes = self.big_holes[0] + self.big_holes[1];
+        holes as f64 / (holes + self.big_jumps).max(1) as f64
+    }
+
+    /// Share of the big holes whose near side is on the right (the projector-shadow side).
+    pub fn big_holes_near_right_share(&self) -> f64 {
+        self.big_holes[0] as f64 / (self.big_holes[0] + self.big_holes[1]).max(1) as f64
+    }
+
     /// Share of the edge holes whose near side is on the right (the projector-shadow side).
     pub fn edge_holes_near_right_share(&self) -> f64 {
         let r: u64 = self.edge_holes_near_right.iter().sum();
@@ -203,6 +232,18 @@ impl Counts {
     pub fn border_mean_px(&self) -> Option<[f64; 4]> {
         (self.border_frames > 0).then(|| self.border_px.map(|b| b as f64 / self.border_frames as f64))
     }
+}
+
+/// Fit `y = baseline·x + extra` to [`Counts::hole_fit`] sums: `(baseline mm, extra px)`; `None` under 10 holes or
+/// without spread in x.
+pub fn hole_width_fit(f: &[f64; 5]) -> Option<(f64, f64)> {
+    let [n, sx, sy, sxx, sxy] = *f;
+    let den = n * sxx - sx * sx;
+    if n < 10.0 || den <= 1e-9 * n * sxx {
+        return None;
+    }
+    let slope = (n * sxy - sx * sy) / den;
+    Some((slope * 1000.0, (sy - slope * sx) / n))
 }
 
 /// Median of a length histogram, pixels (`None` if empty; 64 stands for 64 and longer).
@@ -240,7 +281,7 @@ pub fn measure(frame: &Frame<'_>, window: Window) -> Counts {
     let angle = AngleEstimator::new(frame);
     for y in 0..h {
         let row = &d[y * w..(y + 1) * w];
-        rows_runs(row, y, window, &angle, &mut c);
+        rows_runs(row, y, window, &angle, frame.camera.fx, &mut c);
         row_jumps(row, window, &mut c);
     }
     for y in 0..h {
@@ -281,7 +322,7 @@ fn count_surface(c: &mut Counts, deg: f32, depth: u16, invalid: usize) {
 }
 
 /// Invalid runs bounded by valid pixels on both sides of a row: smooth-surface holes or holes at jumps.
-fn rows_runs(row: &[u16], y: usize, window: Window, angle: &AngleEstimator<'_>, c: &mut Counts) {
+fn rows_runs(row: &[u16], y: usize, window: Window, angle: &AngleEstimator<'_>, fx: f32, c: &mut Counts) {
     let mut x = 0;
     while x < row.len() {
         if row[x] != 0 {
@@ -315,6 +356,20 @@ fn rows_runs(row: &[u16], y: usize, window: Window, angle: &AngleEstimator<'_>, 
                 &mut c.edge_holes_near_left
             };
             hist[bin_of(len)] += 1;
+            let dinv = 1000.0 / l.min(r) as f32 - 1000.0 / l.max(r) as f32;
+            if dinv >= BIG_JUMP_INV_M {
+                let side = (r >= l) as usize; // 0: near side right
+                c.big_holes[side] += 1;
+                if len <= FIT_MAX_HOLE_PX {
+                    let (x, y) = ((fx * dinv) as f64, len as f64);
+                    let f = &mut c.hole_fit[side];
+                    f[0] += 1.0;
+                    f[1] += x;
+                    f[2] += y;
+                    f[3] += x * x;
+                    f[4] += x * y;
+                }
+            }
         }
     }
 }
@@ -349,6 +404,9 @@ fn row_jumps(row: &[u16], window: Window, c: &mut Counts) {
                 if window.holds(a.min(b) as u16) {
                     c.jumps += 1;
                     c.mixed_px += (k - 1) as u64;
+                    if 1000.0 / a.min(b) as f32 - 1000.0 / a.max(b) as f32 >= BIG_JUMP_INV_M {
+                        c.big_jumps += 1;
+                    }
                 }
                 taken = k;
                 break;

@@ -28,15 +28,23 @@ pub struct BlobDropouts {
 }
 
 /// Edge effects of the correlation window at depth jumps: background pixels within `fatten_px` of a nearer surface
-/// take the nearer depth (foreground fattening); those one pixel farther read, with probability `mixed`, a
-/// disparity between the two sides (mixed, "flying" pixels).
+/// take the nearer depth (foreground fattening); at big jumps the next `hole_px` pixels get no depth; elsewhere
+/// those up to `mixed_px` pixels farther read, with probability `mixed`, a disparity between the two sides (mixed,
+/// "flying" pixels).
 #[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct EdgeEffects {
     /// Foreground fattening, pixels (0: none).
     pub fatten_px: u8,
     /// Smallest depth step that counts as a jump, metres.
     pub min_step_m: f32,
-    /// Probability that a pixel just beyond the fattened edge reads a mixed depth (disparity uniform in between).
+    /// Width of the band beyond the fattened edge that has no depth at big jumps (the window straddles both
+    /// surfaces and finds no match), pixels (0: none).
+    pub hole_px: u8,
+    /// A jump is big for `hole_px` when its sides differ by at least this in 1/z, 1/m.
+    pub hole_min_inv_m: f32,
+    /// Width of the band beyond the fattened edge where mixed pixels occur, pixels.
+    pub mixed_px: u8,
+    /// Probability that a pixel in that band reads a mixed depth (disparity uniform in between).
     pub mixed: f32,
 }
 

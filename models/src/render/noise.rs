@@ -97,6 +97,9 @@ impl Default for KinectNoise {
             edges: Some(EdgeEffects {
                 fatten_px: 1,
                 min_step_m: 0.05,
+                hole_px: 0,
+                hole_min_inv_m: 0.1,
+                mixed_px: 2,
                 mixed: 1.0,
             }),
             jitter_keeps_valid: true,
@@ -242,6 +245,7 @@ pub struct NoiseScratch {
     blob_cells: Vec<BlobCell>,
     near_iz: Vec<f32>,
     ring_iz: Vec<f32>,
+    hole_iz: Vec<f32>,
     tables_for: Option<KinectNoise>,
 }
 
@@ -432,7 +436,10 @@ impl KinectNoise {
             let band = (px0, py0, px1, py1);
             let r = e.fatten_px as usize;
             nearest_within(buf, r, band, &mut scratch.near_iz);
-            nearest_within(buf, r + 1, band, &mut scratch.ring_iz);
+            nearest_within(buf, r + e.mixed_px as usize, band, &mut scratch.ring_iz);
+            if e.hole_px > 0 {
+                nearest_within(buf, r + e.hole_px as usize, band, &mut scratch.hole_iz);
+            }
         }
         let rho = self.temporal_correlation.clamp(0.0, 1.0);
         let fresh_weight = (1.0 - rho * rho).sqrt();
@@ -498,7 +505,7 @@ impl KinectNoise {
                 }
                 let mut iz = buf.inv_z[s];
                 let c = scratch.cos_theta[s];
-                let dropped = (self.blobs.is_some() && scratch.blob_mask[v * w + u])
+                let mut dropped = (self.blobs.is_some() && scratch.blob_mask[v * w + u])
                     || self.registration.is_some_and(|r| r.in_border(u, v, w, h));
                 if let Some(e) = self.edges {
                     // A background pixel next to a nearer surface: fattened within fatten_px, maybe mixed one
@@ -507,6 +514,11 @@ impl KinectNoise {
                     let (near, ring) = (scratch.near_iz[s], scratch.ring_iz[s]);
                     if e.fatten_px > 0 && jump(near) {
                         iz = near;
+                    } else if e.hole_px > 0
+                        && jump(scratch.hole_iz[s])
+                        && scratch.hole_iz[s] - iz >= e.hole_min_inv_m
+                    {
+                        dropped = true;
                     } else if jump(ring) && (((bits >> 36) & mask) as f32) < e.mixed * NORMAL_TABLE_LEN as f32
                     {
                         let a = ((bits >> 48) & mask) as f32 / NORMAL_TABLE_LEN as f32;
