@@ -473,3 +473,118 @@ impl<'a> AngleEstimator<'a> {
         Some(cos.acos().to_degrees())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn frame(depth: &[u16], w: usize, h: usize) -> Frame<'_> {
+        Frame {
+            depth,
+            w,
+            h,
+            x0: 0,
+            y0: 0,
+            full: true,
+            camera: Intrinsics::KINECT_V1,
+        }
+    }
+
+    const WINDOW: Window = Window {
+        min_mm: 1000,
+        max_mm: 3500,
+    };
+
+    #[test]
+    fn holes_jumps_and_mixed_pixels_are_counted_as_defined() {
+        let (w, h) = (60, 20);
+        let mut d = vec![2000u16; w * h];
+        for y in 0..h {
+            let row = &mut d[y * w..(y + 1) * w];
+            // A 5-px hole inside the smooth wall, then a jump to 1500 mm through one mixed pixel at 1750 mm, and a
+            // 3-px hole between the near surface (left) and the wall.
+            row[10..15].fill(0);
+            row[31] = 1750;
+            row[32..45].fill(1500);
+            row[45..48].fill(0);
+        }
+        let c = measure(&frame(&d, w, h), WINDOW);
+        assert_eq!(c.smooth_holes.iter().sum::<u64>(), h as u64);
+        assert_eq!(histogram_median(&c.smooth_holes), Some(5));
+        assert_eq!((c.jumps, c.mixed_px), (h as u64, h as u64));
+        assert_eq!(
+            c.edge_holes_near_left[2], h as u64,
+            "3-px holes with the near side on the left"
+        );
+        assert_eq!(c.edge_holes_near_right.iter().sum::<u64>(), 0);
+        assert_eq!(c.border_px, [0, 0, 0, 0]);
+        // 1/1.5 − 1/2 = 0.167 /m: a big discontinuity, with its hole on the near-left side.
+        assert_eq!(c.big_holes, [0, h as u64]);
+        assert_eq!(c.big_jumps, h as u64);
+        assert!((c.mixed_per_jump() - 1.0).abs() < 1e-12);
+        let steps = c.steps_mm();
+        assert!(
+            steps.iter().all(Option::is_none),
+            "three levels per band at most: no step"
+        );
+    }
+
+    #[test]
+    fn border_and_hole_width_fit() {
+        let (w, h) = (40, 30);
+        let mut d = vec![2500u16; w * h];
+        for (i, v) in d.iter_mut().enumerate() {
+            let (u, y) = (i % w, i / w);
+            if u < 3 || y >= h - 2 {
+                *v = 0;
+            }
+        }
+        let c = measure(&frame(&d, w, h), WINDOW);
+        assert_eq!(c.border_mean_px(), Some([3.0, 0.0, 0.0, 2.0]));
+        // Holes of 2 + 0.05·x px against x = fx·Δ(1/z): the fit returns the baseline (mm) and the extra pixels.
+        let mut f = [0f64; 5];
+        for x in [
+            40.0f64, 60.0, 80.0, 100.0, 120.0, 140.0, 160.0, 180.0, 200.0, 220.0,
+        ] {
+            let y = 2.0 + 0.05 * x;
+            f = [f[0] + 1.0, f[1] + x, f[2] + y, f[3] + x * x, f[4] + x * y];
+        }
+        let (b, e) = hole_width_fit(&f).unwrap();
+        assert!((b - 50.0).abs() < 1e-6 && (e - 2.0).abs() < 1e-6, "{b} {e}");
+        assert!(hole_width_fit(&[3.0, 1.0, 1.0, 1.0, 1.0]).is_none());
+    }
+
+    #[test]
+    fn real_bag_and_pngs_read_alike() {
+        // The five tue frames as PNGs and as the ROS 2 bag give the same counts (skipped without shared/).
+        let base = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata");
+        let bag = base.join("mcap/tue_person_depth_16UC1.mcap");
+        if !bag.exists() {
+            eprintln!("shared/realdata not available: skipped");
+            return;
+        }
+        let k = Intrinsics::KINECT_V1;
+        let from_bag = super::super::sources::measure_source(&bag, k, WINDOW, 10).unwrap();
+        assert_eq!(from_bag.frames.len(), 5);
+        let mut pngs: Vec<_> = std::fs::read_dir(base.join("derived"))
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.file_name().unwrap().to_string_lossy().starts_with("tue_"))
+            .collect();
+        pngs.sort();
+        for (p, bag_counts) in pngs.iter().zip(&from_bag.frames) {
+            let png = super::super::sources::measure_source(p, k, WINDOW, 1).unwrap();
+            // The bag brings its camera info (fx 537), the PNG the default: only the angle bins may differ.
+            assert_eq!(png.frames[0].smooth_holes, bag_counts.smooth_holes);
+            assert_eq!(png.frames[0].jumps, bag_counts.jumps);
+        }
+        // Garbage is an error, not a panic.
+        let dir = std::env::temp_dir().join(format!("supine-noise-report-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(dir.join("bad.mcap"), b"not an mcap").unwrap();
+        assert!(super::super::sources::measure_source(&dir.join("bad.mcap"), k, WINDOW, 1).is_err());
+        std::fs::write(dir.join("bad.png"), b"not a png").unwrap();
+        assert!(super::super::sources::measure_source(&dir.join("bad.png"), k, WINDOW, 1).is_err());
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
