@@ -170,6 +170,43 @@ pub fn nearest_within(
     }
 }
 
+/// Near side (1/z) of the depth discontinuities that lie within `r` pixels to the left of each pixel of the band:
+/// a discontinuity is a step of at least `min_inv_m` in 1/z between horizontal neighbours with the near surface on
+/// the left (a slope never steps that much between neighbours unless near grazing); 0 where there is none. Only
+/// this side: the real frames show the extra hole right of foreground objects (the IR-occlusion side), not left.
+/// Written into `out` (full-image indexing); `steps` is scratch.
+pub fn near_side_of_steps(
+    buf: &RenderBuffers,
+    r: usize,
+    min_inv_m: f32,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    steps: &mut Vec<f32>,
+    out: &mut Vec<f32>,
+) {
+    let w = buf.width;
+    out.clear();
+    out.resize(w * buf.height, 0.0);
+    steps.clear();
+    steps.resize(w, 0.0);
+    let sa = x0.saturating_sub(r);
+    for y in y0..y1 {
+        let row = &buf.inv_z[y * w..(y + 1) * w];
+        steps[sa..x1].fill(0.0);
+        for u in sa.max(1)..x1 {
+            let (a, b) = (row[u - 1], row[u]);
+            if b > 0.0 && a - b >= min_inv_m {
+                steps[u] = a;
+            }
+        }
+        for x in x0..x1 {
+            out[y * w + x] = steps[x.saturating_sub(r).max(sa)..=x]
+                .iter()
+                .cloned()
+                .fold(0.0, f32::max);
+        }
+    }
+}
+
 /// What a sequence carries from frame to frame when `temporal_correlation` > 0: the previous frame's three normal
 /// draws per pixel and its blob cells. Fresh (and reset) when the image size or rectangle changes.
 #[derive(Debug, Clone, Default)]

@@ -21,8 +21,8 @@
 //! each), so the whole chain is a few ns per pixel; only the requested rectangle is processed.
 
 use super::effects::{
-    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, mark_left_occlusion, nearest_within,
-    paint_blobs,
+    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, mark_left_occlusion,
+    near_side_of_steps, nearest_within, paint_blobs,
 };
 use super::{Label, NO_TRIANGLE, RenderBuffers};
 use rand::RngCore;
@@ -97,7 +97,7 @@ impl Default for KinectNoise {
             edges: Some(EdgeEffects {
                 fatten_px: 1,
                 min_step_m: 0.05,
-                hole_px: 0,
+                hole_px: 3,
                 hole_min_inv_m: 0.1,
                 mixed_px: 2,
                 mixed: 1.0,
@@ -246,6 +246,7 @@ pub struct NoiseScratch {
     near_iz: Vec<f32>,
     ring_iz: Vec<f32>,
     hole_iz: Vec<f32>,
+    steps: Vec<f32>,
     tables_for: Option<KinectNoise>,
 }
 
@@ -438,7 +439,15 @@ impl KinectNoise {
             nearest_within(buf, r, band, &mut scratch.near_iz);
             nearest_within(buf, r + e.mixed_px as usize, band, &mut scratch.ring_iz);
             if e.hole_px > 0 {
-                nearest_within(buf, r + e.hole_px as usize, band, &mut scratch.hole_iz);
+                let reach = r + e.hole_px as usize;
+                near_side_of_steps(
+                    buf,
+                    reach,
+                    e.hole_min_inv_m,
+                    band,
+                    &mut scratch.steps,
+                    &mut scratch.hole_iz,
+                );
             }
         }
         let rho = self.temporal_correlation.clamp(0.0, 1.0);
@@ -514,10 +523,9 @@ impl KinectNoise {
                     let (near, ring) = (scratch.near_iz[s], scratch.ring_iz[s]);
                     if e.fatten_px > 0 && jump(near) {
                         iz = near;
-                    } else if e.hole_px > 0
-                        && jump(scratch.hole_iz[s])
-                        && scratch.hole_iz[s] - iz >= e.hole_min_inv_m
-                    {
+                    } else if e.hole_px > 0 && scratch.hole_iz[v * w + u] - iz >= 0.5 * e.hole_min_inv_m {
+                        // On the far side of a discontinuity within the window: no match, no depth (decided at
+                        // the pixel itself, so jitter does not scatter the band into salt).
                         dropped = true;
                     } else if jump(ring) && (((bits >> 36) & mask) as f32) < e.mixed * NORMAL_TABLE_LEN as f32
                     {
