@@ -159,7 +159,7 @@ pub fn nearest_within(
     out: &mut Vec<f32>,
 ) {
     let w = buf.width;
-    out.clear();
+    // Only the band is read back: no need to clear the rest.
     out.resize(w * buf.height, 0.0);
     for y in y0..y1 {
         let row = &buf.inv_z[y * w..(y + 1) * w];
@@ -184,7 +184,7 @@ pub fn near_side_of_steps(
     out: &mut Vec<f32>,
 ) {
     let w = buf.width;
-    out.clear();
+    // Only the band is read back: no need to clear the rest.
     out.resize(w * buf.height, 0.0);
     steps.clear();
     steps.resize(w, 0.0);

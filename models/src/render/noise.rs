@@ -609,8 +609,9 @@ impl KinectNoise {
             st.cells.clear();
             st.cells.extend_from_slice(&scratch.blob_cells);
         }
-        scratch.blob_mask.clear();
+        // Only the band is read back: clear just its rows.
         scratch.blob_mask.resize(scratch.cos_theta.len(), false);
+        scratch.blob_mask[py0 * w..py1 * w].fill(false);
         let steps = (ANGLE_TABLE_LEN - 1) as f32;
         let (cos_theta, prob) = (&scratch.cos_theta, &scratch.blob_prob);
         let prob_at = |i: usize| prob[(cos_theta[i] * steps) as usize];
