@@ -11,8 +11,9 @@
 //! Generation is deterministic for a seed (every body has its own ChaCha8 stream derived from the seed and its index,
 //! so the bytes do not depend on thread scheduling) and runs in parallel over bodies with rayon; each worker keeps one
 //! renderer and writes its body file as it goes, so memory stays bounded (one body and one image per worker).
-//! Per body: posing (LBS) once; per view: render (~3 ms), noise on the crop (~6 ms), zlib (~4 ms): ~15 ms of CPU
-//! per image, so 4000 × 12 images take ~6 minutes on 2 free cores.
+//! Per body: posing (LBS) once; per view: render (~3 ms), noise on the crop (~6 ms with the legacy chain; the
+//! blob, edge and registration effects add 20–30 % to the whole image), zlib (~4 ms): ~15 ms of CPU per image, so
+//! 4000 × 12 images take ~6 minutes on 2 free cores.
 //! [`Dataset`] is the reader the trainers use.
 
 pub mod cli;

@@ -4,8 +4,9 @@
 //! consecutive frames of a sequence. Each is off when its manifest parameter is absent, and then consumes no random
 //! numbers, so images made without it stay byte-identical.
 //!
-//! Cost per 640x480 frame: blobs ~0.3 ms (a draw per 32x32 cell, discs painted into a mask), edges ~1 ms (a
-//! row max filter of 1/z), registration ~0.5 ms (one more row scan), temporal state 4.9 MB per sequence.
+//! Cost: the edges' three row max filters (about 15 reads of 1/z per pixel of the band) dominate, then one draw
+//! per 32x32 blob cell with its disc painted, and registration's second row scan; all told the default model makes
+//! a dataset 20–30 % slower than the legacy chain (`docs/noise-model.md`). Temporal state: 12 B per pixel.
 
 use super::RenderBuffers;
 use rand::RngCore;
