@@ -20,6 +20,8 @@ enum Command {
     Dataset(supine_models::dataset::cli::DatasetArgs),
     /// Render a 30 Hz tracking sequence (breathing, slow motion, optional robot arm) to DIR/sequence.oni + truth.jsonl
     Sequence(supine_models::sequence::cli::SequenceArgs),
+    /// Compare synthetic depth noise with real Kinect frames (holes, jumps, mixed pixels, angles, steps) [--json, --png]
+    NoiseReport(supine_models::noise_report::cli::NoiseReportArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +31,7 @@ fn main() -> std::process::ExitCode {
         Command::Body(a) => supine_models::body::cli::run_body(&a),
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
+        Command::NoiseReport(a) => return supine_models::noise_report::cli::run(a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

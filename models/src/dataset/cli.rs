@@ -44,6 +44,18 @@ pub struct DatasetArgs {
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Register depth to the RGB camera (border, IR-occlusion holes), like OpenNI2's registered depth.
+    #[arg(long)]
+    pub registered: bool,
+    /// The noise model before blobs, edge effects and registration (reproduces earlier datasets byte for byte).
+    #[arg(long, conflicts_with = "registered")]
+    pub legacy_noise: bool,
+    /// Noise model from this JSON file (a `KinectNoise`, as in dataset.json's config.noise) instead of the default.
+    #[arg(long, conflicts_with_all = ["registered", "legacy_noise"])]
+    pub noise: Option<PathBuf>,
+    /// Scale of the head's distance to the patient (1 = 1.1–2 m; 1.4 reaches the real frames' 1.5–2.8 m).
+    #[arg(long, default_value_t = 1.0)]
+    pub view_distance_scale: f32,
     /// Replace an existing dataset in DIR.
     #[arg(long)]
     pub force: bool,
@@ -70,6 +82,9 @@ pub fn run(args: DatasetArgs) -> ExitCode {
     }
     if !(0.0..=1.0).contains(&args.train_fraction) {
         return usage("--train-fraction must be between 0 and 1");
+    }
+    if !(0.5..=3.0).contains(&args.view_distance_scale) {
+        return usage("--view-distance-scale must be between 0.5 and 3");
     }
     if args.threads == Some(0) {
         return usage("--threads must be at least 1");
@@ -105,7 +120,18 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
         occluder_fraction: args.occluder_fraction,
         train_fraction: args.train_fraction,
         previews: args.previews.min(args.bodies),
-        noise: KinectNoise::default(),
+        noise: if let Some(path) = &args.noise {
+            let bytes =
+                std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+            serde_json::from_slice(&bytes).map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?
+        } else if args.legacy_noise {
+            KinectNoise::LEGACY
+        } else if args.registered {
+            KinectNoise::default().registered()
+        } else {
+            KinectNoise::default()
+        },
+        view_distance_scale: args.view_distance_scale,
     };
     let total = args.bodies as u64 * args.views as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());

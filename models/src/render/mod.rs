@@ -17,6 +17,7 @@
 //! frame with the ~27k-triangle MakeHuman body, bed, floor and arm takes ~3 ms on one core. Buffers live in
 //! [`Renderer`] and are reused between frames; nothing is allocated per triangle.
 
+pub mod effects;
 pub mod noise;
 
 use nalgebra::{Isometry3, Point3, Vector3};

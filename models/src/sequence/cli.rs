@@ -30,6 +30,13 @@ pub struct SequenceArgs {
     /// Body model file (default: the committed models/artifacts/body.sbm).
     #[arg(long)]
     pub body_model: Option<PathBuf>,
+    /// Register depth to the RGB camera (border, IR-occlusion holes), like OpenNI2's registered depth.
+    #[arg(long)]
+    pub registered: bool,
+    /// The noise model before blobs, edge effects, registration and temporal correlation (reproduces earlier
+    /// sequences byte for byte).
+    #[arg(long, conflicts_with = "registered")]
+    pub legacy_noise: bool,
     /// Write a machine-readable summary here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -56,9 +63,17 @@ pub fn run(args: SequenceArgs) -> ExitCode {
 
 fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     let source = open_source(args.body, args.body_model.as_deref())?;
+    let base = SequenceConfig::new(args.frames, args.seed, args.occluder);
     let cfg = SequenceConfig {
         breathing_amplitude_m: args.breathing_mm / 1000.0,
-        ..SequenceConfig::new(args.frames, args.seed, args.occluder)
+        noise: if args.legacy_noise {
+            crate::render::noise::KinectNoise::LEGACY
+        } else if args.registered {
+            base.noise.registered()
+        } else {
+            base.noise
+        },
+        ..base
     };
     let bar = ProgressBar::with_draw_target(Some(args.frames as u64), ProgressDrawTarget::stderr());
     bar.set_style(

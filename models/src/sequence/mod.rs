@@ -13,6 +13,7 @@ pub mod cli;
 
 use crate::body::PosedBody;
 use crate::dataset::{contact_at, mix_seed, project_salient};
+use crate::render::effects::TemporalState;
 use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
 use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
@@ -224,6 +225,7 @@ pub fn generate(
     );
     let mut renderer = Renderer::new(k);
     let mut scratch = NoiseScratch::default();
+    let mut temporal = TemporalState::default();
     let mut depth = vec![0u16; k.width as usize * k.height as usize];
     let (mut occ_sum, mut occ_max) = (0.0f32, 0.0f32);
     for f in 0..cfg.frames {
@@ -295,12 +297,13 @@ pub fn generate(
         occ_sum += torso_occ;
         occ_max = occ_max.max(torso_occ);
         let noise_seed = mix_seed(mix_seed(cfg.seed, 0x5E0), f as u64 + 1);
-        cfg.noise.apply(
+        cfg.noise.apply_frame(
             renderer.buffers(),
             &k,
             Rect::full(k.width as usize, k.height as usize),
             noise_seed,
             &mut scratch,
+            &mut temporal,
             &mut depth,
         );
         oni.write_frame(&depth, time_us)
