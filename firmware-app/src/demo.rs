@@ -76,7 +76,10 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     }
     let sink_spec = match &args.sink {
         None => None,
-        Some(s) => Some(s.parse::<LinkSpec>().map_err(|e| Failure::usage(format!("--sink: {e}")))?),
+        Some(s) => Some(
+            s.parse::<LinkSpec>()
+                .map_err(|e| Failure::usage(format!("--sink: {e}")))?,
+        ),
     };
     // Outputs are checked (and their temporary files created) before any work: no input is written over, and an
     // unwritable --json fails now rather than after the whole recording.

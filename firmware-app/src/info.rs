@@ -27,7 +27,10 @@ pub fn run(args: InfoArgs) -> Result<(), Failure> {
         }
         None => {
             let dirs = crate::model_dirs::model_dirs();
-            dirs.iter().find(|d| d.is_dir()).cloned().unwrap_or_else(|| dirs[0].clone())
+            dirs.iter()
+                .find(|d| d.is_dir())
+                .cloned()
+                .unwrap_or_else(|| dirs[0].clone())
         }
     };
     let (models, invalid) = models_section(&dir);
@@ -36,7 +39,12 @@ pub fn run(args: InfoArgs) -> Result<(), Failure> {
     out.push_str(&links_section());
     crate::console::out(&out)?;
     if !invalid.is_empty() {
-        return Err(anyhow::anyhow!("invalid model file(s) in {}: {}", dir.display(), invalid.join(", ")).into());
+        return Err(anyhow::anyhow!(
+            "invalid model file(s) in {}: {}",
+            dir.display(),
+            invalid.join(", ")
+        )
+        .into());
     }
     Ok(())
 }
@@ -102,7 +110,10 @@ fn describe_model(bytes: &[u8]) -> (String, bool) {
             Err(e) => (format!("INVALID body model: {e}"), false),
         };
     }
-    let what = format!("model kind {:?}: not known to this build", String::from_utf8_lossy(kind));
+    let what = format!(
+        "model kind {:?}: not known to this build",
+        String::from_utf8_lossy(kind)
+    );
     (what, true)
 }
 
@@ -205,7 +216,11 @@ mod tests {
         assert!(s.contains("INVALID body model"), "{s}");
         assert_eq!(invalid, ["body.sbm"]);
         std::fs::remove_dir_all(&dir).unwrap();
-        assert!(models_section(Path::new("/nonexistent/supine")).0.contains("none yet"));
+        assert!(
+            models_section(Path::new("/nonexistent/supine"))
+                .0
+                .contains("none yet")
+        );
     }
 
     #[test]

@@ -57,7 +57,10 @@ fn init_tracing(verbose: u8) {
     let (filter, bad) = match std::env::var("SUPINE_LOG") {
         Ok(spec) if !spec.trim().is_empty() => match EnvFilter::try_new(&spec) {
             Ok(f) => (f, None),
-            Err(e) => (EnvFilter::new(default), Some(format!("SUPINE_LOG={spec:?} is not a valid filter ({e})"))),
+            Err(e) => (
+                EnvFilter::new(default),
+                Some(format!("SUPINE_LOG={spec:?} is not a valid filter ({e})")),
+            ),
         },
         Ok(_) => (EnvFilter::new(default), None),
         Err(std::env::VarError::NotPresent) => (EnvFilter::new(default), None),

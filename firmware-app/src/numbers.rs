@@ -24,7 +24,13 @@ fn positive<T: FromStr + Display + PartialEq + From<u8>>(s: &str, max: T) -> Res
     match t.parse::<T>() {
         Ok(v) if v == T::from(0) => Err(out_of_range()),
         Ok(v) => Ok(v),
-        Err(_) if t.trim_start_matches(['+', '-']).bytes().all(|b| b.is_ascii_digit()) => Err(out_of_range()),
+        Err(_)
+            if t.trim_start_matches(['+', '-'])
+                .bytes()
+                .all(|b| b.is_ascii_digit()) =>
+        {
+            Err(out_of_range())
+        }
         Err(_) => Err(format!("{s} is not a whole number (1 to {max})")),
     }
 }
@@ -37,10 +43,25 @@ mod tests {
     fn counts_in_and_out_of_range() {
         assert_eq!(positive_u32("1"), Ok(1));
         assert_eq!(positive_u32("4294967295"), Ok(u32::MAX));
-        assert_eq!(positive_u32("0"), Err("0 is out of range (1 to 4294967295)".into()));
-        assert_eq!(positive_u32("4294967296"), Err("4294967296 is out of range (1 to 4294967295)".into()));
-        assert_eq!(positive_u32("-3"), Err("-3 is out of range (1 to 4294967295)".into()));
-        assert_eq!(positive_u64("0"), Err("0 is out of range (1 to 18446744073709551615)".into()));
-        assert_eq!(positive_u32("ten"), Err("ten is not a whole number (1 to 4294967295)".into()));
+        assert_eq!(
+            positive_u32("0"),
+            Err("0 is out of range (1 to 4294967295)".into())
+        );
+        assert_eq!(
+            positive_u32("4294967296"),
+            Err("4294967296 is out of range (1 to 4294967295)".into())
+        );
+        assert_eq!(
+            positive_u32("-3"),
+            Err("-3 is out of range (1 to 4294967295)".into())
+        );
+        assert_eq!(
+            positive_u64("0"),
+            Err("0 is out of range (1 to 18446744073709551615)".into())
+        );
+        assert_eq!(
+            positive_u32("ten"),
+            Err("ten is not a whole number (1 to 4294967295)".into())
+        );
     }
 }

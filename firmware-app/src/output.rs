@@ -104,7 +104,13 @@ impl Output {
     pub fn commit(mut self) -> Result<(), Failure> {
         if let Some(mut file) = self.file.take() {
             file.flush()
-                .and_then(|()| if self.temp.is_some() { file.sync_all() } else { Ok(()) })
+                .and_then(|()| {
+                    if self.temp.is_some() {
+                        file.sync_all()
+                    } else {
+                        Ok(())
+                    }
+                })
                 .map_err(|e| anyhow::anyhow!("writing {}: {e}", self.target.display()))?;
         }
         if let Some(temp) = self.temp.take() {

@@ -73,9 +73,9 @@ impl FilePort {
                 if special {
                     o.custom_flags(libc::O_NONBLOCK);
                 }
-                let file = o.open(path).map_err(|e| {
-                    LinkError::io(format!("opening capture file {}", path.display()), e)
-                })?;
+                let file = o
+                    .open(path)
+                    .map_err(|e| LinkError::io(format!("opening capture file {}", path.display()), e))?;
                 (file, None)
             }
             FileMode::Write if special => (open_special_for_writing(path)?, None),
@@ -128,7 +128,9 @@ impl FilePort {
             }
             if std::fs::metadata(&temp).is_ok_and(|m| m.len() > 0) {
                 let note = format!("; the partial capture is kept in {}", temp.display());
-                let msg = self.write_error.get_or_insert_with(|| "the capture was not completed".into());
+                let msg = self
+                    .write_error
+                    .get_or_insert_with(|| "the capture was not completed".into());
                 msg.push_str(&note);
             } else {
                 let _ = std::fs::remove_file(&temp);
@@ -150,7 +152,12 @@ fn open_special_for_writing(path: &Path) -> Result<File, LinkError> {
             Err(e) if e.raw_os_error() == Some(libc::ENXIO) && !super::signal::interrupted() => {
                 std::thread::sleep(FIFO_RETRY);
             }
-            Err(e) => return Err(LinkError::io(format!("opening {} for writing", path.display()), e)),
+            Err(e) => {
+                return Err(LinkError::io(
+                    format!("opening {} for writing", path.display()),
+                    e,
+                ));
+            }
         }
     }
 }

@@ -56,7 +56,9 @@ pub fn run(args: &DecodeArgs) -> Result<(), Failure> {
             Err(e) => return Err(anyhow::anyhow!("reading stdin: {e}").into()),
         };
         let mut emit = |m: &Message| writeln!(out, "{}", json::message(m));
-        decoder.feed(&buf[..n], &mut emit).map_err(console::stdout_failure)?;
+        decoder
+            .feed(&buf[..n], &mut emit)
+            .map_err(console::stdout_failure)?;
         out.flush().map_err(console::stdout_failure)?;
     }
     let mut emit = |m: &Message| writeln!(out, "{}", json::message(m));

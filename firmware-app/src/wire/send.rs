@@ -38,6 +38,7 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
     let period = Duration::from_secs_f64(1.0 / args.rate);
     links::catch_interrupts().map_err(|e| anyhow::anyhow!("installing the SIGINT handler: {e}"))?;
     let mut link = link::open(&spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    tracing::info!(link = link.describe(), rounds = args.count, "link open, sending");
 
     let start = Instant::now();
     let mut rounds = 0u32;
