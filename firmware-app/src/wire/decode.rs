@@ -5,7 +5,11 @@
 //! SLCAN adapter (`\r`, `\n` or BEL separated). CAN frames go through the reassembler at the default base id.
 //!
 //! stdout: one JSON object per decoded message (fields in `json.rs`). stderr, last: one summary line
-//! `{"summary": {"format": ..., "messages": N, "errors": N, "bad_lines": N, "serial"|"can"|"slcan": {counters}}}`.
+//! `{"summary": {"format": ..., "messages": N, "duplicates": N, "errors": N, "bad_lines": N,
+//! "serial"|"can"|"slcan": {counters}}}`. The same input faults count the same way in every format: a frame cut off
+//! by the end of the input is an error (`serial.truncated`, `can.incomplete`, or a bad line), a line that is not a
+//! frame or not hex is a bad line, and a message identical to the previous one of its kind is a duplicate (not
+//! printed again, not an error).
 //! Corrupt input is only counted: the exit code is 0 unless stdin cannot be read or stdout cannot be written.
 //!
 //! Streaming: stdin is decoded as it arrives, in reads of up to 64 KiB, and each read's messages are flushed before
@@ -18,7 +22,7 @@ use supine_core::wire::can::{CanBase, CanFrame};
 use supine_core::wire::reassembly::{CanReassembler, CanStats};
 use supine_core::wire::slcan::{SlcanReader, SlcanStats};
 use supine_core::wire::stream::{SerialDecoder, SerialStats};
-use supine_core::wire::{Message, candump};
+use supine_core::wire::{Kind, Message, candump};
 
 use super::{DecodeArgs, Format, json};
 use crate::failure::Failure;
@@ -48,6 +52,7 @@ pub fn run(args: &DecodeArgs) -> Result<(), Failure> {
     };
     let mut stdin = std::io::stdin().lock();
     let mut buf = vec![0u8; READ_CHUNK];
+    let mut repeats = Repeats::default();
     loop {
         let n = match stdin.read(&mut buf) {
             Ok(0) => break,
@@ -55,17 +60,44 @@ pub fn run(args: &DecodeArgs) -> Result<(), Failure> {
             Err(e) if e.kind() == std::io::ErrorKind::Interrupted => continue,
             Err(e) => return Err(anyhow::anyhow!("reading stdin: {e}").into()),
         };
-        let mut emit = |m: &Message| writeln!(out, "{}", json::message(m));
+        let mut emit = |m: &Message| repeats.print(&mut out, m);
         decoder
             .feed(&buf[..n], &mut emit)
             .map_err(console::stdout_failure)?;
         out.flush().map_err(console::stdout_failure)?;
     }
-    let mut emit = |m: &Message| writeln!(out, "{}", json::message(m));
-    let summary = decoder.finish(&mut emit).map_err(console::stdout_failure)?;
+    let mut emit = |m: &Message| repeats.print(&mut out, m);
+    let mut summary = decoder.finish(&mut emit).map_err(console::stdout_failure)?;
     out.flush().map_err(console::stdout_failure)?;
+    // `messages` counts what was printed; identical repeats (of a whole message, or of one CAN frame) are
+    // `duplicates`, not errors, in every format.
+    summary["messages"] = json!(repeats.printed);
+    let frame_repeats = summary["can"]["duplicates"].as_u64().unwrap_or(0);
+    summary["duplicates"] = json!(repeats.duplicates + frame_repeats);
     note!("{}", json!({ "summary": summary }));
     Ok(())
+}
+
+/// Drops a message identical to the previous one of its kind (a repeated frame or group) and counts it.
+#[derive(Default)]
+struct Repeats {
+    last: [Option<Message>; Kind::ALL.len()],
+    printed: u64,
+    duplicates: u64,
+}
+
+impl Repeats {
+    fn print(&mut self, out: &mut impl Write, m: &Message) -> std::io::Result<()> {
+        if let Some(last) = self.last.get_mut(m.kind() as usize) {
+            if last.as_ref() == Some(m) {
+                self.duplicates += 1;
+                return Ok(());
+            }
+            *last = Some(m.clone());
+        }
+        self.printed += 1;
+        writeln!(out, "{}", json::message(m))
+    }
 }
 
 type Emit<'a> = dyn FnMut(&Message) -> std::io::Result<()> + 'a;
@@ -194,7 +226,9 @@ impl CobsHexState {
         Ok(())
     }
 
-    fn summary(&self, too_long: u32) -> Value {
+    fn summary(&mut self, too_long: u32) -> Value {
+        // The end of the input: a frame still open is a truncated frame.
+        self.decoder.finish();
         let s = self.decoder.stats();
         let bad_lines = self.bad_lines.saturating_add(too_long);
         json!({
@@ -285,8 +319,9 @@ impl Slcan {
         Ok(json!({
             "format": "slcan",
             "messages": s.messages,
-            "errors": s.errors().saturating_add(l.errors()),
-            "bad_lines": l.bad_lines.saturating_add(l.too_long),
+            // A line that is not a frame (an adapter reply, text) counts as a bad line as in the other formats.
+            "errors": s.errors().saturating_add(l.errors()).saturating_add(l.not_frames),
+            "bad_lines": l.bad_lines.saturating_add(l.too_long).saturating_add(l.not_frames),
             "slcan": slcan_stats(l),
             "can": can_stats(s),
         }))
@@ -318,7 +353,7 @@ fn serial_stats(s: &SerialStats) -> Value {
     json!({
         "messages": s.messages, "cobs": s.cobs, "oversized": s.oversized, "too_short": s.too_short,
         "bad_crc": s.bad_crc, "bad_version": s.bad_version, "unknown_kind": s.unknown_kind,
-        "malformed": s.malformed,
+        "malformed": s.malformed, "truncated": s.truncated,
     })
 }
 
