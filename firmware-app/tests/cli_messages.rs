@@ -125,3 +125,48 @@ fn info_looks_in_supine_models_and_fails_on_an_invalid_model() {
         stderr(&out)
     );
 }
+
+/// The committed demo recording with the record type of its tenth frame's header overwritten.
+fn recording_with_a_damaged_frame_header() -> Vec<u8> {
+    let mut d = std::fs::read(demo_recording()).unwrap();
+    let word = |d: &[u8], at: usize| u32::from_le_bytes(d[at..at + 4].try_into().unwrap());
+    let (mut pos, mut frames) = (24, 0);
+    while pos + 28 <= d.len() {
+        assert_eq!(word(&d, pos), 0x0052_494E, "record magic at {pos}");
+        let (kind, fields, payload) = (word(&d, pos + 4), word(&d, pos + 12), word(&d, pos + 16));
+        if kind == 0x0A {
+            frames += 1;
+            if frames == 10 {
+                d[pos + 4..pos + 8].copy_from_slice(&0x55u32.to_le_bytes());
+                return d;
+            }
+        }
+        pos += (fields + payload) as usize;
+    }
+    panic!("fewer than 10 frames");
+}
+
+#[test]
+fn a_recording_that_plays_fewer_frames_than_its_header_says_is_warned_about() {
+    let dir = scratch("oni-short");
+    std::fs::write(dir.join("damaged.oni"), recording_with_a_damaged_frame_header()).unwrap();
+    let out = run_within(
+        supine()
+            .current_dir(&dir)
+            .args(["demo", "--recording", "damaged.oni"]),
+        Duration::from_secs(120),
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let err = stderr(&out);
+    assert!(
+        err.contains(
+            "damaged.oni: the header says 60 frames but 59 played (1 record(s) of unknown type skipped"
+        ),
+        "{err}"
+    );
+    let table = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(
+        table.lines().any(|l| l.split_whitespace().eq(["frames", "59"])),
+        "{table}"
+    );
+}
