@@ -227,7 +227,7 @@ mod tests {
     fn longest_group() -> (Message, CanGroup) {
         sample::MESSAGES
             .iter()
-            .map(|m| (m.clone(), encode_group(m, CanBase::DEFAULT).unwrap()))
+            .map(|m| (*m, encode_group(m, CanBase::DEFAULT).unwrap()))
             .max_by_key(|(_, g)| g.len())
             .unwrap()
     }

@@ -46,8 +46,8 @@ pub fn run(args: &DecodeArgs) -> Result<(), Failure> {
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());
     let mut decoder = match args.format {
-        Format::CobsHex => Decoder::CobsHex(CobsHex::default()),
-        Format::Candump => Decoder::Candump(Candump::default()),
+        Format::CobsHex => Decoder::CobsHex(Box::default()),
+        Format::Candump => Decoder::Candump(Box::default()),
         _ => Decoder::Slcan(Box::default()),
     };
     let mut stdin = std::io::stdin().lock();
@@ -93,7 +93,7 @@ impl Repeats {
                 self.duplicates += 1;
                 return Ok(());
             }
-            *last = Some(m.clone());
+            *last = Some(*m);
         }
         self.printed += 1;
         writeln!(out, "{}", json::message(m))
@@ -104,8 +104,8 @@ type Emit<'a> = dyn FnMut(&Message) -> std::io::Result<()> + 'a;
 
 /// The streaming decoder of one input format.
 enum Decoder {
-    CobsHex(CobsHex),
-    Candump(Candump),
+    CobsHex(Box<CobsHex>),
+    Candump(Box<Candump>),
     Slcan(Box<Slcan>),
 }
 
