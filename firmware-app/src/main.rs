@@ -80,8 +80,37 @@ fn init_tracing(verbose: u8) {
     }
 }
 
+/// `--help`, `--version` or a usage error from clap, written without panics: help to stdout (a closed pipe is 141,
+/// a full disk exit 1 like every other command), usage errors to stderr with exit 2.
+fn clap_exit(e: &clap::Error) -> std::process::ExitCode {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => match console::out(&e.render().to_string()) {
+            Ok(()) => std::process::ExitCode::SUCCESS,
+            Err(Failure::BrokenPipe) => std::process::ExitCode::from(Failure::BrokenPipe.exit_code()),
+            Err(f) => {
+                note!("supine: error: {f}");
+                std::process::ExitCode::from(f.exit_code())
+            }
+        },
+        _ => {
+            // Coloured like clap does when stderr is a terminal.
+            let text = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+                e.render().ansi().to_string()
+            } else {
+                e.render().to_string()
+            };
+            note_raw!("{text}");
+            std::process::ExitCode::from(2)
+        }
+    }
+}
+
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return clap_exit(&e),
+    };
     init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),

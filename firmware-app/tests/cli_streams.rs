@@ -45,6 +45,7 @@ fn commands(dir: &std::path::Path) -> Vec<Vec<String>> {
     let rec = rec.to_str().unwrap().to_owned();
     vec![
         vec!["info".into()],
+        vec!["--help".into()],
         vec![
             "demo".into(),
             "--frames".into(),
