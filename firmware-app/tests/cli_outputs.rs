@@ -234,3 +234,35 @@ fn a_capture_sink_is_complete_or_absent() {
     assert_eq!(files_in(&dir), ["cap.bin"]);
     assert!(std::fs::metadata(dir.join("cap.bin")).unwrap().len() > 0);
 }
+
+#[test]
+fn a_demo_that_fails_mid_run_leaves_an_old_capture_sink_intact() {
+    let dir = scratch("failed-demo-sink");
+    let full = std::fs::read(demo_recording()).unwrap();
+    // Cut inside the third frame: the run fails after two frames were sent to the capture.
+    std::fs::write(dir.join("cut.oni"), &full[..400_000]).unwrap();
+    std::fs::write(dir.join("cap.bin"), "old capture").unwrap();
+    let out = run_within(
+        supine()
+            .current_dir(&dir)
+            .args(["demo", "--recording", "cut.oni", "--sink", "file:cap.bin"]),
+        LIMIT,
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert_eq!(
+        std::fs::read_to_string(dir.join("cap.bin")).unwrap(),
+        "old capture"
+    );
+    let partial: Vec<String> = files_in(&dir)
+        .into_iter()
+        .filter(|f| f.ends_with(".partial"))
+        .collect();
+    assert!(partial.len() <= 1, "{:?}", files_in(&dir));
+    for p in &partial {
+        assert!(
+            stderr(&out).contains(p.as_str()),
+            "the partial capture is named: {}",
+            stderr(&out)
+        );
+    }
+}

@@ -29,7 +29,8 @@ pub enum FileMode {
 ///
 /// Writing a regular file goes to a temporary file beside it (`.NAME.PID.partial`), renamed over the target when
 /// the link closes without a write error, so a failed run never leaves a half-written capture under the target's
-/// name; an empty temporary file is removed, a partial one kept and named in [`Port::write_error`]. FIFOs and
+/// name; an empty temporary file is removed, a partial one kept and named in [`Port::write_error`] (or in a
+/// warning, when the port is dropped without being closed). FIFOs and
 /// devices are opened non-blocking: a FIFO with no reader is waited for (SIGINT/SIGTERM end the wait once
 /// [`super::signal::catch_interrupts`] is installed), one with no writer yet reads as "nothing yet", not as the
 /// end. A write that fails (ENOSPC, EIO, ...) is counted, its OS error kept, and further writes back off
@@ -176,8 +177,21 @@ fn temp_path(target: &Path) -> PathBuf {
 }
 
 impl Drop for FilePort {
+    /// Dropped without [`Port::shutdown`] (the link was not closed: the run failed): the target keeps its old
+    /// content; an empty temporary file is removed, a partial one kept and logged.
     fn drop(&mut self) {
-        self.finish();
+        self.file = None;
+        if let Some(temp) = self.temp.take() {
+            if std::fs::metadata(&temp).is_ok_and(|m| m.len() > 0) {
+                tracing::warn!(
+                    "{}: the link was not closed; the partial capture is kept in {}",
+                    self.path.display(),
+                    temp.display()
+                );
+            } else {
+                let _ = std::fs::remove_file(&temp);
+            }
+        }
     }
 }
 
