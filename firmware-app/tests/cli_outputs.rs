@@ -266,3 +266,28 @@ fn a_demo_that_fails_mid_run_leaves_an_old_capture_sink_intact() {
         );
     }
 }
+
+#[test]
+fn a_recording_to_a_full_disk_is_one_error() {
+    let dir = scratch("record-dev-full");
+    copy_recording(&dir, "rec.oni");
+    let out = run_within(
+        supine().current_dir(&dir).args([
+            "record",
+            "--source",
+            "file:rec.oni",
+            "--out",
+            "/dev/full",
+            "--frames",
+            "3",
+        ]),
+        LIMIT,
+    );
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert!(
+        !err.contains("on drop"),
+        "no second report of the same failure: {err}"
+    );
+    assert_eq!(err.matches("No space left on device").count(), 1, "{err}");
+}

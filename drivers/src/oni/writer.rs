@@ -256,7 +256,11 @@ impl<W: Write + Seek> OniWriter<W> {
 
     /// Complete the file (NODE_REMOVED, SEEK_TABLE, END, header patches), flush it and return the writer.
     pub fn finish(mut self) -> Result<W, SourceError> {
-        self.finish_in_place()?;
+        if let Err(e) = self.finish_in_place() {
+            // Reported here; the drop must not try again and log the same failure a second time.
+            self.failed = true;
+            return Err(e);
+        }
         self.out
             .take()
             .ok_or_else(|| SourceError::new(SourceErrorKind::Other, "writer already finished"))
