@@ -23,7 +23,12 @@ pub fn run(args: InfoArgs) -> Result<(), Failure> {
     let dir = match args.models {
         Some(dir) if dir.is_dir() => dir,
         Some(dir) => {
-            return Err(anyhow::anyhow!("--models {}: no such directory", dir.display()).into());
+            let what = if dir.exists() {
+                "not a directory"
+            } else {
+                "no such directory"
+            };
+            return Err(anyhow::anyhow!("--models {}: {what}", dir.display()).into());
         }
         None => {
             let dirs = crate::model_dirs::model_dirs();
