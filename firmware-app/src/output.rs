@@ -72,14 +72,21 @@ impl Output {
         if meta.as_ref().is_some_and(|m| m.permissions().readonly()) {
             return Err(anyhow::anyhow!("{flag} {}: the file is read-only", target.display()).into());
         }
-        let temp = temp_path(target);
+        // Through a symlink, the file it points to is replaced and the link stays.
+        let real = match std::fs::symlink_metadata(target) {
+            Ok(m) if m.file_type().is_symlink() => {
+                std::fs::canonicalize(target).unwrap_or_else(|_| target.to_owned())
+            }
+            _ => target.to_owned(),
+        };
+        let temp = temp_path(&real);
         let file = OpenOptions::new()
             .write(true)
             .create_new(true)
             .open(&temp)
             .map_err(|e| anyhow::anyhow!("{flag} {}: cannot create a file there: {e}", target.display()))?;
         Ok(Output {
-            target: target.to_owned(),
+            target: real,
             temp: Some(temp),
             file: Some(file),
         })

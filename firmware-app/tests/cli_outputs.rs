@@ -291,3 +291,37 @@ fn a_recording_to_a_full_disk_is_one_error() {
     );
     assert_eq!(err.matches("No space left on device").count(), 1, "{err}");
 }
+
+#[test]
+fn an_output_through_a_symlink_replaces_the_file_and_keeps_the_link() {
+    let dir = scratch("json-symlink");
+    copy_recording(&dir, "rec.oni");
+    std::fs::create_dir(dir.join("reports")).unwrap();
+    std::fs::write(dir.join("reports/latest.json"), "old").unwrap();
+    std::os::unix::fs::symlink("reports/latest.json", dir.join("report.json")).unwrap();
+    let out = run_within(
+        supine().current_dir(&dir).args([
+            "demo",
+            "--frames",
+            "2",
+            "--recording",
+            "rec.oni",
+            "--json",
+            "report.json",
+        ]),
+        LIMIT,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(
+        std::fs::symlink_metadata(dir.join("report.json"))
+            .unwrap()
+            .file_type()
+            .is_symlink()
+    );
+    assert!(
+        std::fs::read_to_string(dir.join("reports/latest.json"))
+            .unwrap()
+            .contains("\"frames\": 2")
+    );
+    assert_eq!(files_in(&dir.join("reports")), ["latest.json"]);
+}

@@ -81,7 +81,7 @@ impl FilePort {
             }
             FileMode::Write if special => (open_special_for_writing(path)?, None),
             FileMode::Write => {
-                let temp = temp_path(path);
+                let temp = temp_path(&real_path(path));
                 let file = OpenOptions::new()
                     .write(true)
                     .create(true)
@@ -92,7 +92,12 @@ impl FilePort {
             }
         };
         Ok(FilePort {
-            path: path.to_owned(),
+            // Renamed over at close: through a symlink, the file it points to (the link stays).
+            path: if temp.is_some() {
+                real_path(path)
+            } else {
+                path.to_owned()
+            },
             temp,
             file: Some(file),
             mode,
@@ -160,6 +165,16 @@ fn open_special_for_writing(path: &Path) -> Result<File, LinkError> {
                 ));
             }
         }
+    }
+}
+
+/// `path`, or the file it points to when it is a symlink.
+fn real_path(path: &Path) -> PathBuf {
+    match std::fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => {
+            std::fs::canonicalize(path).unwrap_or_else(|_| path.to_owned())
+        }
+        _ => path.to_owned(),
     }
 }
 
