@@ -16,6 +16,8 @@ use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use supine_drivers::source::{self, DepthSource, SourceErrorKind, SourceSpec};
 
 use crate::failure::Failure;
+use crate::output::{self, Output};
+use crate::{note, note_raw};
 
 /// Where the committed demo recording lives, relative to the repository root or the installed model directory.
 const DEMO_RECORDING: &str = "demo/sequence.oni";
@@ -27,7 +29,7 @@ const WORKING_RANGE_MM: std::ops::RangeInclusive<u16> = 500..=4500;
 #[derive(Args)]
 pub struct DemoArgs {
     /// Process at most this many frames (default: the whole recording).
-    #[arg(long, value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, value_parser = crate::numbers::positive_u32)]
     pub frames: Option<u32>,
     /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`
     /// (default: encoded and counted, sent nowhere).
@@ -41,23 +43,11 @@ pub struct DemoArgs {
     pub json: Option<PathBuf>,
 }
 
-/// The model directories searched for the demo recording, in order.
-fn model_dirs() -> Vec<PathBuf> {
-    let mut dirs = Vec::new();
-    if let Some(dir) = std::env::var_os("SUPINE_MODELS") {
-        dirs.push(PathBuf::from(dir));
-    }
-    dirs.push(PathBuf::from("models/artifacts"));
-    // Where the Debian package installs the default models (cross/package).
-    dirs.push(PathBuf::from("/usr/share/supine/models"));
-    dirs
-}
-
 fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
     if let Some(path) = &args.recording {
         return Ok(path.clone());
     }
-    let dirs = model_dirs();
+    let dirs = crate::model_dirs::model_dirs();
     dirs.iter().map(|d| d.join(DEMO_RECORDING)).find(|p| p.is_file()).ok_or_else(|| {
         let tried: Vec<String> = dirs.iter().map(|d| d.join(DEMO_RECORDING).display().to_string()).collect();
         anyhow::anyhow!(
@@ -80,17 +70,45 @@ fn percentile_ms(sorted: &[Duration], p: f64) -> f64 {
 /// Run `supine demo`.
 pub fn run(args: DemoArgs) -> Result<(), Failure> {
     let path = find_recording(&args)?;
+    // A FIFO or device would block the open until a peer appears; a recording is a regular file.
+    if std::fs::metadata(&path).is_ok_and(|m| !m.is_file()) {
+        return Err(anyhow::anyhow!("--recording {}: not a regular file", path.display()).into());
+    }
+    let sink_spec = match &args.sink {
+        None => None,
+        Some(s) => Some(
+            s.parse::<LinkSpec>()
+                .map_err(|e| Failure::usage(format!("--sink: {e}")))?,
+        ),
+    };
+    // Outputs are checked (and their temporary files created) before any work: no input is written over, and an
+    // unwritable --json fails now rather than after the whole recording.
+    let inputs = [("--recording", path.as_path())];
+    let json_out = match &args.json {
+        Some(p) => Some(Output::create("--json", p, &inputs)?),
+        None => None,
+    };
+    if let Some(LinkSpec::File { path: sink_path }) = &sink_spec {
+        let mut others = inputs.to_vec();
+        if let Some(j) = &args.json {
+            others.push(("--json", j.as_path()));
+        }
+        output::refuse_overwriting("--sink", sink_path, &others)?;
+        if args.json.as_deref().is_some_and(|j| j == sink_path.as_path()) {
+            return Err(Failure::usage(format!(
+                "--sink and --json are both {}; give them different files",
+                sink_path.display()
+            )));
+        }
+    }
     let spec = SourceSpec::File { path: path.clone() };
     let mut src = source::open(&spec).map_err(|e| anyhow::anyhow!("opening the demo recording: {e}"))?;
-    let mut sink = match &args.sink {
+    let mut sink = match &sink_spec {
         None => None,
-        Some(s) => {
-            let spec: LinkSpec = s.parse().map_err(|e| Failure::usage(format!("--sink: {e}")))?;
-            Some(link::open(&spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("{e}"))?)
-        }
+        Some(spec) => Some(link::open(spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("{e}"))?),
     };
-    eprintln!("supine demo: {}", src.describe());
-    eprintln!(
+    note!("supine demo: {}", src.describe());
+    note!(
         "supine demo: the tracker (joint forest, shape estimation, ICP) is not built yet; this run exercises the\n\
          \x20            depth source, frame checks and the wire/link path, and reports the tracker as initialising."
     );
@@ -137,17 +155,32 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         }
         latencies.push(t0.elapsed());
         if latencies.len() % 30 == 0 {
-            eprint!("\rsupine demo: {} frames", latencies.len());
+            note_raw!("\rsupine demo: {} frames", latencies.len());
         }
     }
-    eprintln!();
+    note!();
     // Messages a full link queue evicted (newest wins): a replay runs faster than a slow line can carry.
     let mut dropped = 0u64;
+    let mut sink_failure = None;
     if let Some(link) = sink.as_mut() {
-        if let Err(e) = link.close(Duration::from_secs(2)) {
-            eprintln!("supine demo: closing the sink: {e}");
+        let closed = link.close(Duration::from_secs(2));
+        let c = link.counters();
+        dropped = c.dropped;
+        // A sink that failed its writes makes the run fail (after the table), naming the OS error once.
+        if let Some(e) = link.last_io_error() {
+            if link.describe() == "stdout" && e.contains("(os error 32)") {
+                return Err(Failure::BrokenPipe);
+            }
+            sink_failure = Some(format!(
+                "--sink {}: {e} ({} write error(s), {} of {} packets not delivered)",
+                link.describe(),
+                c.io_errors,
+                c.queued.saturating_sub(c.sent),
+                c.queued
+            ));
+        } else if let Err(e) = closed {
+            sink_failure = Some(format!("--sink {}: {e}", link.describe()));
         }
-        dropped = link.counters().dropped;
     }
     let frames = latencies.len();
     if frames == 0 {
@@ -180,12 +213,16 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         "n/a until the tracker lands".to_owned(),
     );
     if args.sink.as_deref() == Some("stdout") {
-        eprint!("supine demo summary\n{table}");
+        note_raw!("supine demo summary\n{table}");
     } else {
-        print!("supine demo summary\n{table}");
+        crate::console::out(&format!("supine demo summary\n{table}"))?;
     }
 
-    if let Some(out) = &args.json {
+    // A failed run leaves an old --json file as it was (the dropped output removes its empty temporary file).
+    if let Some(msg) = sink_failure {
+        return Err(anyhow::anyhow!(msg).into());
+    }
+    if let Some(out) = json_out {
         let report = serde_json::json!({
             "frames": frames,
             "latency_ms_p50": p50,
@@ -197,11 +234,8 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             "tracker": "not built",
             "recording": path.display().to_string(),
         });
-        std::fs::write(
-            out,
-            serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?,
-        )
-        .map_err(|e| anyhow::anyhow!("writing {}: {e}", out.display()))?;
+        let text = serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?;
+        output::write_all(out, text.as_bytes())?;
     }
     Ok(())
 }

@@ -9,6 +9,8 @@ pub enum Failure {
     Usage(String),
     /// The work itself failed (device missing, file corrupt, link down): exit code 1.
     Runtime(anyhow::Error),
+    /// stdout is a pipe whose reader went away (`| head`): end quietly with 141, the status of a SIGPIPE death.
+    BrokenPipe,
 }
 
 impl Failure {
@@ -22,6 +24,7 @@ impl Failure {
         match self {
             Failure::Usage(_) => 2,
             Failure::Runtime(_) => 1,
+            Failure::BrokenPipe => 141,
         }
     }
 }
@@ -32,6 +35,7 @@ impl fmt::Display for Failure {
             Failure::Usage(msg) => write!(f, "{msg}"),
             // `{:#}` prints the whole context chain: "opening /dev/ttyUSB0: No such file or directory".
             Failure::Runtime(err) => write!(f, "{err:#}"),
+            Failure::BrokenPipe => write!(f, "stdout closed"),
         }
     }
 }

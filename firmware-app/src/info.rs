@@ -12,23 +12,52 @@ use crate::failure::Failure;
 /// Arguments of `supine info`.
 #[derive(Args, Debug)]
 pub struct InfoArgs {
-    /// Directory with the model files (default: models/artifacts).
-    #[arg(long, default_value = "models/artifacts")]
-    pub models: std::path::PathBuf,
+    /// Directory with the model files (default: the first of $SUPINE_MODELS, models/artifacts,
+    /// /usr/share/supine/models that exists, as `supine demo` searches them).
+    #[arg(long)]
+    pub models: Option<std::path::PathBuf>,
 }
 
-/// Run `supine info`: print the sections to stdout.
+/// Run `supine info`: print the sections to stdout. Exit 1 (after printing) when a model file is invalid.
 pub fn run(args: InfoArgs) -> Result<(), Failure> {
-    let mut out = String::new();
-    out.push_str(&models_section(&args.models));
+    let dir = match args.models {
+        Some(dir) if dir.is_dir() => dir,
+        Some(dir) => {
+            let what = if dir.exists() {
+                "not a directory"
+            } else {
+                "no such directory"
+            };
+            return Err(anyhow::anyhow!("--models {}: {what}", dir.display()).into());
+        }
+        None => {
+            let dirs = crate::model_dirs::model_dirs();
+            dirs.iter()
+                .find(|d| d.is_dir())
+                .cloned()
+                .unwrap_or_else(|| dirs[0].clone())
+        }
+    };
+    let (models, invalid) = models_section(&dir);
+    let mut out = models;
     out.push_str(&devices_section());
     out.push_str(&links_section());
-    print!("{out}");
+    crate::console::out(&out)?;
+    if !invalid.is_empty() {
+        return Err(anyhow::anyhow!(
+            "invalid model file(s) in {}: {}",
+            dir.display(),
+            invalid.join(", ")
+        )
+        .into());
+    }
     Ok(())
 }
 
-/// The model files present (name and size); "none yet" when the directory is missing or empty.
-fn models_section(dir: &Path) -> String {
+/// The model files present (name and size), "none yet" when the directory is missing or empty, and the names of
+/// the files that are supine model files but do not validate.
+fn models_section(dir: &Path) -> (String, Vec<String>) {
+    let mut invalid = Vec::new();
     let mut s = format!("models ({}):\n", dir.display());
     let mut files: Vec<std::path::PathBuf> = match std::fs::read_dir(dir) {
         Ok(entries) => entries
@@ -48,35 +77,49 @@ fn models_section(dir: &Path) -> String {
             .map(|n| n.to_string_lossy().into_owned())
             .unwrap_or_default();
         let line = match std::fs::read(&path) {
-            Ok(bytes) => format!("{} bytes, {}", bytes.len(), describe_model(&bytes)),
-            Err(e) => format!("unreadable: {e}"),
+            Ok(bytes) => {
+                let (what, valid) = describe_model(&bytes);
+                if !valid {
+                    invalid.push(name.clone());
+                }
+                format!("{} bytes, {what}", bytes.len())
+            }
+            Err(e) => {
+                invalid.push(name.clone());
+                format!("unreadable: {e}")
+            }
         };
         let _ = writeln!(s, "  {name}  {line}");
     }
-    s
+    (s, invalid)
 }
 
-/// What a model file is and whether it validates (magic, versions, sizes, checksum), as core would load it.
-fn describe_model(bytes: &[u8]) -> String {
+/// What a model file is and whether it validates (magic, versions, sizes, checksum), as core would load it; false
+/// only for a supine model file of a known kind that fails to validate.
+fn describe_model(bytes: &[u8]) -> (String, bool) {
     use supine_core::{body_model, model_file};
     if bytes.get(..8) != Some(&model_file::MAGIC[..]) {
-        return "not a supine model file".to_owned();
+        return ("not a supine model file".to_owned(), true);
     }
     let kind = bytes.get(12..16).unwrap_or_default();
     if kind == body_model::KIND {
         return match body_model::BodyModelView::parse(bytes) {
-            Ok(view) => format!(
-                "body model v{}, {} vertices, valid",
-                body_model::FORMAT_VERSION,
-                view.vertex_count()
+            Ok(view) => (
+                format!(
+                    "body model v{}, {} vertices, valid",
+                    body_model::FORMAT_VERSION,
+                    view.vertex_count()
+                ),
+                true,
             ),
-            Err(e) => format!("INVALID body model: {e}"),
+            Err(e) => (format!("INVALID body model: {e}"), false),
         };
     }
-    format!(
+    let what = format!(
         "model kind {:?}: not known to this build",
         String::from_utf8_lossy(kind)
-    )
+    );
+    (what, true)
 }
 
 /// Depth devices visible to each backend of this build.
@@ -154,9 +197,10 @@ mod tests {
     fn models_section_lists_files_or_says_none() {
         let dir = std::env::temp_dir().join(format!("supine-info-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        assert!(models_section(&dir).contains("none yet"));
+        assert!(models_section(&dir).0.contains("none yet"));
         std::fs::write(dir.join("joints.forest"), [0u8; 12]).unwrap();
-        let s = models_section(&dir);
+        let (s, invalid) = models_section(&dir);
+        assert!(invalid.is_empty(), "{invalid:?}");
         assert!(
             s.contains("joints.forest  12 bytes, not a supine model file"),
             "{s}"
@@ -167,18 +211,21 @@ mod tests {
         ))
         .unwrap();
         std::fs::write(dir.join("body.sbm"), &body).unwrap();
-        assert!(
-            models_section(&dir).contains("body model v1, 13380 vertices, valid"),
-            "{}",
-            models_section(&dir)
-        );
+        let (s, invalid) = models_section(&dir);
+        assert!(s.contains("body model v1, 13380 vertices, valid"), "{s}");
+        assert!(invalid.is_empty(), "{invalid:?}");
         let last = body.len() - 1;
         body[last] ^= 0xFF;
         std::fs::write(dir.join("body.sbm"), &body).unwrap();
-        let s = models_section(&dir);
+        let (s, invalid) = models_section(&dir);
         assert!(s.contains("INVALID body model"), "{s}");
+        assert_eq!(invalid, ["body.sbm"]);
         std::fs::remove_dir_all(&dir).unwrap();
-        assert!(models_section(Path::new("/nonexistent/supine")).contains("none yet"));
+        assert!(
+            models_section(Path::new("/nonexistent/supine"))
+                .0
+                .contains("none yet")
+        );
     }
 
     #[test]

@@ -1,19 +1,26 @@
 //! `supine`: the service on the robot's head computer and the tools an integrator uses to bring it up.
 //!
 //! Commands follow the contract in the README (`supine --help`): exit 0 on success, 1 on a runtime failure,
-//! 2 on bad usage; errors name the bad argument or file.
+//! 2 on bad usage; errors name the bad argument or file. A closed stdout pipe (`| head`) ends quietly with 141, the
+//! status of a program killed by SIGPIPE; a failure to write stderr turns a success into exit 1.
 
 mod config;
+mod console;
 mod demo;
 mod failure;
 mod info;
 mod links;
+mod model_dirs;
 mod notify;
+mod numbers;
+mod output;
 mod record;
 mod run;
 mod wire;
 
 use clap::{Parser, Subcommand};
+
+use crate::failure::Failure;
 
 /// supine: upper-body tracking of a patient on a bed from a Kinect v1, with pose and probe packets to the arm controller.
 #[derive(Parser)]
@@ -43,6 +50,7 @@ enum Command {
 }
 
 fn init_tracing(verbose: u8) {
+    use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
     let default = match verbose {
         0 => "warn",
@@ -50,16 +58,63 @@ fn init_tracing(verbose: u8) {
         2 => "debug",
         _ => "trace",
     };
-    let filter = EnvFilter::try_from_env("SUPINE_LOG").unwrap_or_else(|_| EnvFilter::new(default));
-    // Logs go to stderr so that stdout stays machine-readable (JSON lines, candump, ...).
+    let (filter, bad) = match std::env::var("SUPINE_LOG") {
+        Ok(spec) if !spec.trim().is_empty() => match EnvFilter::try_new(&spec) {
+            Ok(f) => (f, None),
+            Err(e) => (
+                EnvFilter::new(default),
+                Some(format!("SUPINE_LOG={spec:?} is not a valid filter ({e})")),
+            ),
+        },
+        Ok(_) => (EnvFilter::new(default), None),
+        Err(std::env::VarError::NotPresent) => (EnvFilter::new(default), None),
+        Err(std::env::VarError::NotUnicode(v)) => (
+            EnvFilter::new(default),
+            Some(format!("SUPINE_LOG={v:?} is not valid UTF-8")),
+        ),
+    };
+    // Logs go to stderr so that stdout stays machine-readable (JSON lines, candump, ...); colour only on a terminal.
     let _ = tracing_subscriber::fmt()
         .with_env_filter(filter)
         .with_writer(std::io::stderr)
+        .with_ansi(std::io::stderr().is_terminal())
         .try_init();
+    if let Some(msg) = bad {
+        note!("supine: warning: {msg}; using the default level `{default}`");
+    }
+}
+
+/// `--help`, `--version` or a usage error from clap, written without panics: help to stdout (a closed pipe is 141,
+/// a full disk exit 1 like every other command), usage errors to stderr with exit 2.
+fn clap_exit(e: &clap::Error) -> std::process::ExitCode {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => match console::out(&e.render().to_string()) {
+            Ok(()) => std::process::ExitCode::SUCCESS,
+            Err(Failure::BrokenPipe) => std::process::ExitCode::from(Failure::BrokenPipe.exit_code()),
+            Err(f) => {
+                note!("supine: error: {f}");
+                std::process::ExitCode::from(f.exit_code())
+            }
+        },
+        _ => {
+            // Coloured like clap does when stderr is a terminal.
+            let text = if std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+                e.render().ansi().to_string()
+            } else {
+                e.render().to_string()
+            };
+            note_raw!("{text}");
+            std::process::ExitCode::from(2)
+        }
+    }
 }
 
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return clap_exit(&e),
+    };
     init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
@@ -69,9 +124,11 @@ fn main() -> std::process::ExitCode {
         Command::Wire(cmd) => wire::run(cmd),
     };
     match result {
+        Ok(()) if console::stderr_failed() => std::process::ExitCode::FAILURE,
         Ok(()) => std::process::ExitCode::SUCCESS,
+        Err(Failure::BrokenPipe) => std::process::ExitCode::from(Failure::BrokenPipe.exit_code()),
         Err(failure) => {
-            eprintln!("supine: error: {failure}");
+            note!("supine: error: {failure}");
             std::process::ExitCode::from(failure.exit_code())
         }
     }

@@ -1,19 +1,23 @@
 //! `supine record --source SOURCE --out FILE.oni [--frames N]`: record a depth stream to an .oni file that
 //! libOpenNI2 and `supine replay` play back.
 //!
-//! Live sources record until `--frames` frames are written (or forever: the file is written as it goes and stays
-//! readable up to the last whole frame if the process is killed); file sources stop at their end. Consecutive
-//! timeouts for longer than `--timeout-ms` end the recording with an error.
+//! Live sources record until `--frames` frames are written (or forever); file sources stop at their end.
+//! Consecutive timeouts for longer than `--timeout-ms` end the recording with an error. The recording is written
+//! to a temporary file beside `--out` (`.NAME.PID.partial`, readable up to the last whole frame if the process is
+//! killed) and renamed over `--out` only when it is complete, so a failed run leaves an old file intact; a failed
+//! run's partial recording is kept and named in the error. `--out` may not be the `file:` source.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
 use supine_drivers::kinect_raw::DisparityCalibration;
-use supine_drivers::oni::{Codec, OniWriter};
-use supine_drivers::source::{self, OpenOptions, SourceErrorKind, SourceSpec};
+use supine_drivers::oni::{Codec, OniWriter, OniWriterConfig};
+use supine_drivers::source::{self, DepthSource, OpenOptions, SourceErrorKind, SourceSpec};
 
 use crate::failure::Failure;
+use crate::note_raw;
+use crate::output::{self, Output};
 
 /// Arguments of `supine record`.
 #[derive(Args, Debug)]
@@ -25,7 +29,7 @@ pub struct RecordArgs {
     #[arg(long)]
     pub out: PathBuf,
     /// Stop after this many frames (default: until the source ends).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::numbers::positive_u32)]
     pub frames: Option<u32>,
     /// Depth codec: 16zT (what OpenNI's Recorder writes, default), 16zP or NONE (raw).
     #[arg(long, default_value = "16zT")]
@@ -44,17 +48,69 @@ pub fn run(args: RecordArgs) -> Result<(), Failure> {
         .source
         .parse()
         .map_err(|e: source::SourceError| Failure::usage(format!("--source: {e}")))?;
-    if args.frames == Some(0) {
-        return Err(Failure::usage("--frames must be at least 1"));
-    }
     let options = OpenOptions {
         v4l2_calibration: args.v4l2_calibration,
     };
-    let mut src = source::open_with(&spec, &options).map_err(|e| anyhow::anyhow!("opening {spec}: {e}"))?;
+    let inputs: Vec<(&str, &std::path::Path)> = match &spec {
+        SourceSpec::File { path } => vec![("--source", path.as_path())],
+        _ => Vec::new(),
+    };
+    if let SourceSpec::File { path } = &spec
+        && std::fs::metadata(path).is_ok_and(|m| !m.is_file())
+    {
+        return Err(anyhow::anyhow!("--source {}: not a regular file", path.display()).into());
+    }
+    // Checked and created before the source is opened: an unwritable --out fails at start.
+    let mut out = Output::create("--out", &args.out, &inputs)?;
+    // A file source's error already names its path; other sources are named by their spec.
+    let mut src = source::open_with(&spec, &options).map_err(|e| match &spec {
+        SourceSpec::File { .. } => anyhow::anyhow!("--source: {e}"),
+        _ => anyhow::anyhow!("opening {spec}: {e}"),
+    })?;
     let k = src.intrinsics();
-    let mut writer = OniWriter::create(&args.out, &k, args.codec)
-        .map_err(|e| anyhow::anyhow!("creating {}: {e}", args.out.display()))?;
-    eprintln!(
+    let file = std::io::BufWriter::with_capacity(1 << 20, out.take_file());
+    let mut writer = match OniWriter::new(file, OniWriterConfig::new(&k, args.codec)) {
+        Ok(w) => w,
+        Err(e) => {
+            let kept = out.abandon();
+            let err = anyhow::anyhow!("creating {}: {e}", args.out.display());
+            return Err(output::with_partial(err, kept).into());
+        }
+    };
+    let result = record(&args, &spec, &mut *src, &mut writer);
+    let n = writer.frames_written();
+    let finished = result.and_then(|()| {
+        writer
+            .finish()
+            .map(drop)
+            .map_err(|e| anyhow::anyhow!("finishing {}: {e}", args.out.display()).into())
+    });
+    if let Err(e) = finished {
+        let kept = out.abandon();
+        return Err(match e {
+            Failure::Runtime(err) => output::with_partial(err, kept).into(),
+            other => other,
+        });
+    }
+    if n == 0 {
+        drop(out.abandon());
+        return Err(anyhow::anyhow!("{spec} delivered no frames").into());
+    }
+    out.commit()?;
+    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
+    crate::note!("\rrecorded {n} frames ({bytes} bytes) to {}", args.out.display());
+    Ok(())
+}
+
+/// The recording loop: frames from `src` into `writer` until `--frames`, the source's end, or a failure.
+fn record(
+    args: &RecordArgs,
+    spec: &SourceSpec,
+    src: &mut dyn DepthSource,
+    writer: &mut OniWriter<std::io::BufWriter<std::fs::File>>,
+) -> Result<(), Failure> {
+    let k = src.intrinsics();
+    crate::note!(
         "recording {} ({}x{}) to {} with {}",
         src.describe(),
         k.width,
@@ -83,26 +139,23 @@ pub fn run(args: RecordArgs) -> Result<(), Failure> {
                     return Err(anyhow::anyhow!("no frame from {spec} for {} ms", args.timeout_ms).into());
                 }
             }
-            Err(e) => return Err(anyhow::anyhow!("reading {spec}: {e}").into()),
+            Err(e) => {
+                return Err(match spec {
+                    SourceSpec::File { .. } => anyhow::anyhow!("--source: {e}"),
+                    _ => anyhow::anyhow!("reading {spec}: {e}"),
+                }
+                .into());
+            }
         }
         if last_report.elapsed() >= Duration::from_secs(2) {
             let total = args.frames.map_or(String::new(), |n| format!("/{n}"));
-            eprint!(
+            note_raw!(
                 "\r{}{total} frames, {:.0} s",
                 writer.frames_written(),
                 started.elapsed().as_secs_f64()
             );
             last_report = Instant::now();
         }
-    }
-    let n = writer.frames_written();
-    writer
-        .finish()
-        .map_err(|e| anyhow::anyhow!("finishing {}: {e}", args.out.display()))?;
-    let bytes = std::fs::metadata(&args.out).map(|m| m.len()).unwrap_or(0);
-    eprintln!("\rrecorded {n} frames ({bytes} bytes) to {}", args.out.display());
-    if n == 0 {
-        return Err(anyhow::anyhow!("{spec} delivered no frames").into());
     }
     Ok(())
 }

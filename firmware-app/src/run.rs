@@ -26,10 +26,7 @@ pub struct RunArgs {
 pub fn run(args: RunArgs) -> Result<(), Failure> {
     if let Some(path) = args.check_config {
         let checked = check(&path)?;
-        use std::io::Write;
-        std::io::stdout()
-            .write_all(summary(&path, &checked).as_bytes())
-            .map_err(|e| anyhow::anyhow!("writing to stdout: {e}"))?;
+        crate::console::out(&summary(&path, &checked))?;
         return Ok(());
     }
     let path = args.config.unwrap_or_default();

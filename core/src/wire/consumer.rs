@@ -6,6 +6,12 @@
 //! depth frame it came from. `now` must be on the tracker's capture clock (a shared PTP-disciplined clock, or the
 //! arm's clock corrected by an offset estimate); a pose far in the future means the clocks disagree and is not
 //! usable either. Newer means a later capture timestamp: replays and reordered frames never replace a newer pose.
+//! One exception: a tracker that restarts begins a new sequence on a clock that may have gone back. Two messages
+//! of a kind in a row that are both older than the held one, with sequence numbers more than [`RESTART_WINDOW`]
+//! behind it, but continue from each other (sequence number 1 to [`RESTART_WINDOW`] ahead, later capture time)
+//! are read as a restart and the second replaces the held data
+//! (counted in [`ArmConsumer::restarts`]); a single stale or replayed message still never does. A pose is only
+//! usable while the newest health message is itself recent ([`Limits::max_health_age_us`]).
 //! Cost: one serial-decoder pass per byte plus a comparison per message.
 
 use super::message::{Body, Message, ProbeReport, TorsoPose};
@@ -30,6 +36,9 @@ pub struct Limits {
     pub max_age_us: u64,
     /// How far in the future a capture time may lie (clock jitter), µs.
     pub max_future_us: u64,
+    /// Oldest acceptable health message, µs (e.g. 600 000: three health periods of 200 ms). A tracker whose health
+    /// has gone quiet may have stopped judging its own output; its poses are then not usable.
+    pub max_health_age_us: u64,
 }
 
 impl Default for Limits {
@@ -37,9 +46,13 @@ impl Default for Limits {
         Limits {
             max_age_us: 100_000,
             max_future_us: 5_000,
+            max_health_age_us: 600_000,
         }
     }
 }
+
+/// Largest sequence step between two older-than-held messages for them to be read as a tracker restart.
+pub const RESTART_WINDOW: u16 = 16;
 
 /// The verdict on held data at a given now.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -96,14 +109,48 @@ fn judge<T: Copy>(held: Option<Stamped<T>>, now: Timestamp, limits: Limits) -> F
     }
 }
 
-/// Replace `held` by `new` if `new` was captured later; false (and nothing changes) otherwise.
-fn keep_newest<T>(held: &mut Option<Stamped<T>>, new: Stamped<T>) -> bool {
-    match held {
-        Some(h) if new.timestamp <= h.timestamp => false,
-        _ => {
-            *held = Some(new);
-            true
+/// The newest value of one kind, and the last older message seen since (a restart candidate).
+#[derive(Debug, Clone, Copy)]
+struct Held<T> {
+    newest: Option<Stamped<T>>,
+    behind: Option<(u16, Timestamp)>,
+}
+
+impl<T> Held<T> {
+    const EMPTY: Self = Held {
+        newest: None,
+        behind: None,
+    };
+
+    /// Keep `new` if it was captured later than the held value, or if it continues an older sequence that began
+    /// with the previous message (a tracker restart); returns `(taken, restart)`.
+    fn offer(&mut self, new: Stamped<T>) -> (bool, bool) {
+        let Some(h) = &self.newest else {
+            self.newest = Some(new);
+            return (true, false);
+        };
+        if new.timestamp > h.timestamp {
+            self.newest = Some(new);
+            self.behind = None;
+            return (true, false);
         }
+        // Only a message clearly from an earlier sequence (older capture time and a sequence number far behind the
+        // held one) can start a restart; a repeat or a slightly late frame never does.
+        let far_behind = h.seq.wrapping_sub(new.seq) > RESTART_WINDOW;
+        if new.timestamp == h.timestamp || !far_behind {
+            self.behind = None;
+            return (false, false);
+        }
+        let restart = self.behind.is_some_and(|(seq, ts)| {
+            (1..=RESTART_WINDOW).contains(&new.seq.wrapping_sub(seq)) && new.timestamp > ts
+        });
+        if restart {
+            self.newest = Some(new);
+            self.behind = None;
+            return (true, true);
+        }
+        self.behind = Some((new.seq, new.timestamp));
+        (false, false)
     }
 }
 
@@ -111,10 +158,11 @@ fn keep_newest<T>(held: &mut Option<Stamped<T>>, new: Stamped<T>) -> bool {
 #[derive(Debug, Clone)]
 pub struct ArmConsumer<const N: usize = DEFAULT_CAPACITY> {
     decoder: SerialDecoder<N>,
-    pose: Option<Stamped<TorsoPose>>,
-    probe: Option<Stamped<ProbeReport>>,
-    state: Option<Stamped<TrackerState>>,
+    pose: Held<TorsoPose>,
+    probe: Held<ProbeReport>,
+    state: Held<TrackerState>,
     not_newer: u32,
+    restarts: u32,
     errors_at_last_good: u32,
 }
 
@@ -129,10 +177,11 @@ impl<const N: usize> ArmConsumer<N> {
     pub const fn new() -> Self {
         ArmConsumer {
             decoder: SerialDecoder::new(),
-            pose: None,
-            probe: None,
-            state: None,
+            pose: Held::EMPTY,
+            probe: Held::EMPTY,
+            state: Held::EMPTY,
             not_newer: 0,
+            restarts: 0,
             errors_at_last_good: 0,
         }
     }
@@ -152,60 +201,61 @@ impl<const N: usize> ArmConsumer<N> {
     pub fn accept(&mut self, m: &Message) -> bool {
         self.errors_at_last_good = self.decoder.stats().errors();
         let (seq, timestamp) = (m.seq, m.timestamp);
-        let taken = match m.body {
-            Body::TorsoPose(value) => keep_newest(
-                &mut self.pose,
-                Stamped {
-                    seq,
-                    timestamp,
-                    value,
-                },
-            ),
-            Body::Probe(value) => keep_newest(
-                &mut self.probe,
-                Stamped {
-                    seq,
-                    timestamp,
-                    value,
-                },
-            ),
-            Body::Health(h) => keep_newest(
-                &mut self.state,
-                Stamped {
-                    seq,
-                    timestamp,
-                    value: h.state,
-                },
-            ),
+        let (taken, restart) = match m.body {
+            Body::TorsoPose(value) => self.pose.offer(Stamped {
+                seq,
+                timestamp,
+                value,
+            }),
+            Body::Probe(value) => self.probe.offer(Stamped {
+                seq,
+                timestamp,
+                value,
+            }),
+            Body::Health(h) => self.state.offer(Stamped {
+                seq,
+                timestamp,
+                value: h.state,
+            }),
             // Other kinds are not the arm's business here (or are its own messages echoed back).
             _ => return false,
         };
         if !taken {
             self.not_newer = self.not_newer.saturating_add(1);
         }
+        if restart {
+            // The message before this one was counted as not newer; it was the restart's first.
+            self.not_newer = self.not_newer.saturating_sub(1);
+            self.restarts = self.restarts.saturating_add(1);
+        }
         taken
     }
 
     /// The newest torso pose judged at `now`.
     pub fn pose(&self, now: Timestamp, limits: Limits) -> Freshness<TorsoPose> {
-        judge(self.pose, now, limits)
+        judge(self.pose.newest, now, limits)
     }
 
     /// The newest probe report judged at `now`.
     pub fn probe(&self, now: Timestamp, limits: Limits) -> Freshness<ProbeReport> {
-        judge(self.probe, now, limits)
+        judge(self.probe.newest, now, limits)
     }
 
     /// The tracker state of the newest health message, if any.
     pub fn tracker_state(&self) -> Option<TrackerState> {
-        self.state.map(|s| s.value)
+        self.state.newest.map(|s| s.value)
     }
 
-    /// A pose the arm may act on now: fresh, and the tracker's newest health says it is tracking (possibly
-    /// occluded or degraded) rather than lost, initialising or without sensor.
+    /// A pose the arm may act on now: fresh, and the tracker's newest health, itself no older than
+    /// [`Limits::max_health_age_us`] (nor from the future), says it is tracking (possibly occluded or degraded)
+    /// rather than lost, initialising or without sensor.
     pub fn usable_pose(&self, now: Timestamp, limits: Limits) -> Option<TorsoPose> {
+        let health_limits = Limits {
+            max_age_us: limits.max_health_age_us,
+            ..limits
+        };
         let tracking = matches!(
-            self.tracker_state(),
+            judge(self.state.newest, now, health_limits).fresh(),
             Some(TrackerState::Tracking | TrackerState::Occluded | TrackerState::Degraded)
         );
         if tracking {
@@ -226,6 +276,11 @@ impl<const N: usize> ArmConsumer<N> {
     /// Messages dropped because they were not newer than the held ones (replays, reordering).
     pub fn not_newer(&self) -> u32 {
         self.not_newer
+    }
+
+    /// Tracker restarts detected (a new sequence on a clock that went back), all kinds together.
+    pub fn restarts(&self) -> u32 {
+        self.restarts
     }
 
     /// The decoder's counters.
@@ -322,6 +377,71 @@ mod tests {
         assert_eq!(c.link_stats().bad_crc, 1);
         c.feed(&wire(&pose_at(3, 1_066_667)));
         assert_eq!(c.corrupt_since_last_good(), 0);
+    }
+
+    fn health_at(seq: u16, us: u64, state: TrackerState) -> Message {
+        let Body::Health(mut h) = MESSAGES[4].body else {
+            unreachable!()
+        };
+        h.state = state;
+        Message {
+            seq,
+            timestamp: at(us),
+            body: Body::Health(h),
+        }
+    }
+
+    #[test]
+    fn a_tracker_restart_with_its_clock_gone_back_is_followed() {
+        let mut c: ArmConsumer = ArmConsumer::new();
+        for i in 0..10u16 {
+            let t = 50_000_000 + u64::from(i) * 33_333;
+            assert!(c.accept(&pose_at(1000 + i, t)));
+            c.accept(&health_at(1000 + i, t, TrackerState::Tracking));
+        }
+        // The tracker restarts: sequence from 0, capture clock from 1 s.
+        assert!(
+            !c.accept(&pose_at(0, 1_000_000)),
+            "one older message alone is not a restart"
+        );
+        assert!(c.accept(&pose_at(1, 1_033_333)));
+        c.accept(&health_at(0, 1_000_000, TrackerState::Tracking));
+        c.accept(&health_at(1, 1_033_333, TrackerState::Tracking));
+        assert_eq!(c.restarts(), 2);
+        assert_eq!(c.not_newer(), 0);
+        let limits = Limits::default();
+        assert!(c.usable_pose(at(1_040_000), limits).is_some());
+        assert!(c.accept(&pose_at(2, 1_066_667)));
+        // A late frame of the new sequence still never wins.
+        assert!(!c.accept(&pose_at(1, 1_033_333)));
+        let Freshness::Fresh { data, .. } = c.pose(at(1_070_000), limits) else {
+            panic!()
+        };
+        assert_eq!(data.seq, 2);
+        // A stray frame from before the restart has a later capture time, so it is held, but it is judged from the
+        // future (not usable) and the new sequence takes over again after two frames.
+        assert!(c.accept(&pose_at(1005, 50_166_665)));
+        assert!(matches!(
+            c.pose(at(1_080_000), limits),
+            Freshness::FromFuture { .. }
+        ));
+        assert!(!c.accept(&pose_at(3, 1_100_000)));
+        assert!(c.accept(&pose_at(4, 1_133_333)));
+        assert!(c.pose(at(1_140_000), limits).fresh().is_some());
+    }
+
+    #[test]
+    fn a_pose_is_not_usable_once_health_goes_quiet() {
+        let mut c: ArmConsumer = ArmConsumer::new();
+        let limits = Limits::default();
+        c.accept(&health_at(1, 1_000_000, TrackerState::Tracking));
+        c.accept(&pose_at(1, 1_000_000));
+        assert!(c.usable_pose(at(1_050_000), limits).is_some());
+        // Poses keep coming but the last health message is 0.7 s old.
+        c.accept(&pose_at(2, 1_700_000));
+        assert_eq!(c.usable_pose(at(1_710_000), limits), None);
+        c.accept(&health_at(2, 1_700_000, TrackerState::Tracking));
+        assert!(c.usable_pose(at(1_710_000), limits).is_some());
     }
 
     #[test]

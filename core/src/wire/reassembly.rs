@@ -6,15 +6,17 @@
 //! and ignored), bad CRCs and foreign frames. Allocation-free: 7 slots of 9 × 6 bytes. Cost per frame: one CRC-8
 //! over 9 bytes and a 6-byte copy; a completed group adds one decode.
 //!
-//! Expiry needs no clock: a partial group is abandoned once [`EXPIRY_FRAMES`] frames have arrived since its last
-//! frame, so that a group losing its tail can never be merged with the group sixteen counter values later.
+//! Expiry needs no clock: a partial group is abandoned once [`EXPIRY_FRAMES`] frames of the supine id block have
+//! arrived since its last frame, so that a group losing its tail can never be merged with the group sixteen counter
+//! values later. Other nodes' traffic does not age groups (a busy bus would otherwise expire them early), and the
+//! frame clock wraps rather than saturates, so expiry still works after 2^32 frames.
 
 use super::can::{self, CanBase, CanFrame, E2eError, E2ePacket};
 use super::can_map::{self, MAX_GROUP_FRAMES, Signals};
 use super::error::DecodeError;
 use super::message::{Kind, Message};
 
-/// Frames (of any id) after which an incomplete group is abandoned.
+/// Frames of the supine id block after which an incomplete group is abandoned.
 pub const EXPIRY_FRAMES: u32 = 32;
 
 /// Counters of what a [`CanReassembler`] has seen. Each counter saturates.
@@ -30,7 +32,7 @@ pub struct CanStats {
     pub bad_length: u32,
     /// Frames whose CRC-8 did not match.
     pub bad_crc: u32,
-    /// Exact repeats of a frame already held.
+    /// Exact repeats of a frame already held (ignored; not errors).
     pub duplicates: u32,
     /// Groups abandoned with frames missing (replaced by a newer group, expired, or left at [`CanReassembler::flush`]).
     pub incomplete: u32,
@@ -40,17 +42,11 @@ pub struct CanStats {
 }
 
 impl CanStats {
-    /// All errors together (foreign frames are not errors).
+    /// All errors together (foreign frames and identical repeats are not errors).
     pub fn errors(&self) -> u32 {
-        [
-            self.bad_length,
-            self.bad_crc,
-            self.duplicates,
-            self.incomplete,
-            self.invalid,
-        ]
-        .iter()
-        .fold(0u32, |a, &b| a.saturating_add(b))
+        [self.bad_length, self.bad_crc, self.incomplete, self.invalid]
+            .iter()
+            .fold(0u32, |a, &b| a.saturating_add(b))
     }
 }
 
@@ -86,7 +82,7 @@ struct Slot {
     counter: u8,
     /// Bit `i` set when frame `i` of the group is held.
     mask: u16,
-    /// Frame count (of all ids) when this slot last took a frame.
+    /// The block's frame clock when this slot last took a frame.
     touched: u32,
     signals: [Signals; MAX_GROUP_FRAMES],
 }
@@ -104,6 +100,8 @@ pub struct CanReassembler {
     base: CanBase,
     slots: [Slot; Kind::ALL.len()],
     stats: CanStats,
+    /// Frames of the own id block so far, wrapping: the clock groups expire by.
+    clock: u32,
 }
 
 impl CanReassembler {
@@ -122,6 +120,7 @@ impl CanReassembler {
                 incomplete: 0,
                 invalid: 0,
             },
+            clock: 0,
         }
     }
 
@@ -142,11 +141,12 @@ impl CanReassembler {
     pub fn push(&mut self, frame: &CanFrame) -> Option<Result<Message, CanError>> {
         let stats = &mut self.stats;
         stats.frames = stats.frames.saturating_add(1);
-        let now = stats.frames;
         let Some((kind, index)) = self.base.offset_of(frame.id()).and_then(can_map::locate) else {
             stats.foreign = stats.foreign.saturating_add(1);
             return None;
         };
+        self.clock = self.clock.wrapping_add(1);
+        let now = self.clock;
         let packet = match E2ePacket::new_checked(frame.data()) {
             Ok(p) if !frame.is_remote() => p,
             _ => {
@@ -213,5 +213,94 @@ impl CanReassembler {
         for slot in &mut self.slots {
             Self::abandon(&mut self.stats, slot);
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::wire::can::{CanId, StandardId};
+    use crate::wire::can_map::{CanGroup, encode_group};
+    use crate::wire::sample;
+
+    /// The sample message with the longest CAN group, and that group.
+    fn longest_group() -> (Message, CanGroup) {
+        sample::MESSAGES
+            .iter()
+            .map(|m| (*m, encode_group(m, CanBase::DEFAULT).unwrap()))
+            .max_by_key(|(_, g)| g.len())
+            .unwrap()
+    }
+
+    /// A one-frame group of another kind than `not`, as filler traffic of the own block.
+    fn filler(not: Kind) -> CanGroup {
+        sample::MESSAGES
+            .iter()
+            .filter(|m| m.kind() != not)
+            .map(|m| encode_group(m, CanBase::DEFAULT).unwrap())
+            .min_by_key(|g| g.len())
+            .unwrap()
+    }
+
+    #[test]
+    fn other_nodes_frames_do_not_age_a_group() {
+        let (msg, group) = longest_group();
+        assert!(group.len() >= 2);
+        let mut r = CanReassembler::new(CanBase::DEFAULT);
+        assert_eq!(r.push(&group[0]), None);
+        let foreign = CanFrame::new(CanId::Standard(StandardId::new(0x7FF).unwrap()), &[0; 8]).unwrap();
+        for _ in 0..(2 * EXPIRY_FRAMES) {
+            assert_eq!(r.push(&foreign), None);
+        }
+        let mut out = None;
+        for f in &group[1..] {
+            out = r.push(f);
+        }
+        assert_eq!(out, Some(Ok(msg)));
+        assert_eq!(r.stats().incomplete, 0);
+        assert_eq!(r.stats().foreign, 2 * EXPIRY_FRAMES);
+    }
+
+    fn expires_after_own_block_traffic(mut r: CanReassembler) {
+        let (msg, group) = longest_group();
+        assert_eq!(r.push(&group[0]), None);
+        let fill = filler(msg.kind());
+        let mut pushed = 0;
+        while pushed <= EXPIRY_FRAMES {
+            for f in &fill {
+                r.push(f);
+                pushed += 1;
+            }
+        }
+        // The rest of the group arrives too late: the old part expired, so no message is stitched together.
+        for f in &group[1..] {
+            assert_eq!(r.push(f), None);
+        }
+        assert_eq!(r.stats().incomplete, 1);
+        r.flush();
+        assert_eq!(r.stats().incomplete, 2);
+    }
+
+    #[test]
+    fn a_group_expires_after_32_frames_of_its_own_block() {
+        expires_after_own_block_traffic(CanReassembler::new(CanBase::DEFAULT));
+    }
+
+    #[test]
+    fn expiry_survives_the_frame_counter_wrapping() {
+        let mut r = CanReassembler::new(CanBase::DEFAULT);
+        r.stats.frames = u32::MAX - 3;
+        r.clock = u32::MAX - 3;
+        expires_after_own_block_traffic(r);
+    }
+
+    #[test]
+    fn identical_repeats_are_duplicates_not_errors() {
+        let (_, group) = longest_group();
+        let mut r = CanReassembler::new(CanBase::DEFAULT);
+        r.push(&group[0]);
+        assert_eq!(r.push(&group[0]), Some(Err(CanError::Duplicate)));
+        assert_eq!(r.stats().duplicates, 1);
+        assert_eq!(r.stats().errors(), 0);
     }
 }

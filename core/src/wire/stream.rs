@@ -32,6 +32,8 @@ pub struct SerialStats {
     pub unknown_kind: u32,
     /// Frames whose payload was truncated, had trailing bytes, held an out-of-range value or bad postcard.
     pub malformed: u32,
+    /// Bytes of a frame still waiting for their closing `0x00` when the input ended ([`SerialDecoder::finish`]).
+    pub truncated: u32,
 }
 
 impl SerialStats {
@@ -45,6 +47,7 @@ impl SerialStats {
             self.bad_version,
             self.unknown_kind,
             self.malformed,
+            self.truncated,
         ]
         .iter()
         .fold(0u32, |a, &b| a.saturating_add(b))
@@ -108,6 +111,7 @@ impl<const N: usize> SerialDecoder<N> {
                 bad_version: 0,
                 unknown_kind: 0,
                 malformed: 0,
+                truncated: 0,
             },
         }
     }
@@ -180,6 +184,15 @@ impl<const N: usize> SerialDecoder<N> {
         }
     }
 
+    /// The input ended (end of a capture): a frame still waiting for its closing `0x00` is counted as `truncated`
+    /// and forgotten. A live link never calls this; its next bytes may still complete the frame.
+    pub fn finish(&mut self) {
+        if self.len > 0 && !self.discarding {
+            self.stats.truncated = self.stats.truncated.saturating_add(1);
+        }
+        self.reset();
+    }
+
     /// Forget a partly received frame (e.g. after the link was reopened); counters are kept.
     pub fn reset(&mut self) {
         self.len = 0;
@@ -196,6 +209,22 @@ mod tests {
     use super::*;
     use crate::wire::sample::MESSAGES;
     use crate::wire::serial::MAX_WIRE_LEN;
+
+    #[test]
+    fn a_frame_cut_off_by_the_end_of_input_is_counted_as_truncated() {
+        let mut d: SerialDecoder = SerialDecoder::new();
+        let full = wire(&MESSAGES[0]);
+        d.feed_all(&full, |_| {});
+        d.feed_all(&full[..full.len() / 2], |_| {});
+        assert_eq!(d.stats().errors(), 0, "a live stream may still complete it");
+        d.finish();
+        assert_eq!(
+            (d.stats().messages, d.stats().truncated, d.stats().errors()),
+            (1, 1, 1)
+        );
+        d.finish();
+        assert_eq!(d.stats().truncated, 1, "counted once");
+    }
 
     fn wire(m: &Message) -> Vec<u8> {
         let mut buf = [0u8; MAX_WIRE_LEN];

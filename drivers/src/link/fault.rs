@@ -292,6 +292,10 @@ impl<L: Link> Link for FaultyLink<L> {
     fn describe(&self) -> &str {
         self.inner.describe()
     }
+
+    fn last_io_error(&self) -> Option<String> {
+        self.inner.last_io_error()
+    }
 }
 
 #[cfg(test)]

@@ -154,6 +154,12 @@ pub trait Link {
 
     /// A description for logs: the spec string it was opened from.
     fn describe(&self) -> &str;
+
+    /// The first OS error a write failed with, in words (`No space left on device (os error 28)`), if any: a send
+    /// path that failed is reported once, by the caller, instead of per retry.
+    fn last_io_error(&self) -> Option<String> {
+        None
+    }
 }
 
 impl<L: Link + ?Sized> Link for Box<L> {
@@ -189,6 +195,9 @@ impl<L: Link + ?Sized> Link for Box<L> {
     }
     fn describe(&self) -> &str {
         (**self).describe()
+    }
+    fn last_io_error(&self) -> Option<String> {
+        (**self).last_io_error()
     }
 }
 
@@ -467,6 +476,10 @@ impl<P: Port, C: Codec> Link for PacketLink<P, C> {
 
     fn describe(&self) -> &str {
         &self.name
+    }
+
+    fn last_io_error(&self) -> Option<String> {
+        self.port.write_error().map(str::to_owned)
     }
 }
 

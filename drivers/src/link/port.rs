@@ -74,6 +74,10 @@ pub trait Port {
     }
     /// The last error kind that took the port down, if any.
     fn last_error(&self) -> Option<LinkErrorKind>;
+    /// The first OS error a write failed with, in words, for ports whose writes can fail for good (files, stdout).
+    fn write_error(&self) -> Option<&str> {
+        None
+    }
     /// Close for good: release the device. Later reads and writes return 0 and the state is `Ended`.
     fn shutdown(&mut self);
 }

@@ -1,11 +1,15 @@
 //! The bounded transmit queue between `Link::send` and the device: a ring of pre-allocated byte slots, one encoded
 //! message per slot. When full, the newest message wins: the oldest message that has not started going out is
-//! evicted and counted. Nothing allocates after construction as long as encoders stay within the slot capacity.
+//! evicted and counted, but only once the new message has encoded: a message that fails to encode evicts nothing.
+//! Nothing allocates after construction as long as encoders stay within the slot capacity (a full queue encodes into
+//! a spare slot, swapped into the ring on success).
 
 /// A ring of encoded messages waiting for the device.
 #[derive(Debug)]
 pub struct TxQueue {
     slots: Vec<Vec<u8>>,
+    /// Where a message is encoded while the queue is full, so a failed encode leaves every queued message in place.
+    spare: Vec<u8>,
     head: usize,
     len: usize,
     /// Bytes of the head slot already written.
@@ -19,6 +23,7 @@ impl TxQueue {
         let capacity = capacity.max(2);
         TxQueue {
             slots: (0..capacity).map(|_| Vec::with_capacity(slot_bytes)).collect(),
+            spare: Vec::with_capacity(slot_bytes),
             head: 0,
             len: 0,
             offset: 0,
@@ -41,28 +46,35 @@ impl TxQueue {
         self.evicted
     }
 
-    /// Encode one message into the next free slot with `encode`, evicting the oldest unstarted message if the queue
-    /// is full. If `encode` fails the slot is released and the error returned; nothing is queued.
+    /// Encode one message into the next free slot with `encode`; if the queue is full and the encode succeeded, the
+    /// oldest unstarted message is evicted to make room. If `encode` fails the error is returned and the queue is as
+    /// it was: nothing queued, nothing evicted.
     pub fn push_with<E>(&mut self, encode: impl FnOnce(&mut Vec<u8>) -> Result<(), E>) -> Result<(), E> {
         let cap = self.slots.len();
-        if self.len == cap {
-            if self.offset == 0 {
-                // Nothing in flight: drop the head.
-                self.head = (self.head + 1) % cap;
-                self.offset = 0;
-            } else {
-                // The head is partly written and must finish; drop the next one by moving the head's slot forward.
-                let next = (self.head + 1) % cap;
-                self.slots.swap(self.head, next);
-                self.head = next;
-            }
-            self.len -= 1;
-            self.evicted += 1;
+        if self.len < cap {
+            let tail = (self.head + self.len) % cap;
+            let slot = &mut self.slots[tail];
+            slot.clear();
+            encode(slot)?;
+            self.len += 1;
+            return Ok(());
         }
+        self.spare.clear();
+        encode(&mut self.spare)?;
+        if self.offset == 0 {
+            // Nothing in flight: drop the head.
+            self.head = (self.head + 1) % cap;
+            self.offset = 0;
+        } else {
+            // The head is partly written and must finish; drop the next one by moving the head's slot forward.
+            let next = (self.head + 1) % cap;
+            self.slots.swap(self.head, next);
+            self.head = next;
+        }
+        self.len -= 1;
+        self.evicted += 1;
         let tail = (self.head + self.len) % cap;
-        let slot = &mut self.slots[tail];
-        slot.clear();
-        encode(slot)?;
+        std::mem::swap(&mut self.slots[tail], &mut self.spare);
         self.len += 1;
         Ok(())
     }
@@ -166,6 +178,19 @@ mod tests {
     }
 
     #[test]
+    fn a_failed_encode_on_a_full_queue_evicts_nothing() {
+        let mut q = TxQueue::new(2, 8);
+        push(&mut q, 1);
+        push(&mut q, 2);
+        assert_eq!(q.push_with(|_| Err("too big")), Err("too big"));
+        assert_eq!(q.evicted(), 0);
+        assert_eq!(q.len(), 2);
+        assert_eq!(q.front(), Some(&[1, 1, 1][..]));
+        q.advance(3);
+        assert_eq!(q.front(), Some(&[2, 2, 2][..]));
+    }
+
+    #[test]
     fn no_growth_after_construction() {
         let mut q = TxQueue::new(2, 8);
         let before: Vec<usize> = q.slots.iter().map(|s| s.capacity()).collect();
@@ -173,7 +198,11 @@ mod tests {
             push(&mut q, b);
             q.advance(1);
         }
-        let after: Vec<usize> = q.slots.iter().map(|s| s.capacity()).collect();
-        assert_eq!(before, after);
+        let mut after: Vec<usize> = q.slots.iter().map(|s| s.capacity()).collect();
+        after.sort();
+        let mut before = before;
+        before.sort();
+        // Slots trade places with the spare but never grow.
+        assert!(after.iter().all(|&c| c == before[0]), "{before:?} -> {after:?}");
     }
 }

@@ -51,6 +51,10 @@ pub struct OniReader<R: Read + Seek = BufReader<File>> {
     fields: Vec<u8>,
     max_payload: usize,
     done: bool,
+    /// Frames of our node returned so far.
+    frames_read: u32,
+    /// Records skipped because their type is none OpenNI writes (a corrupt header).
+    unknown_records: u32,
 }
 
 impl<R: Read + Seek> std::fmt::Debug for OniReader<R> {
@@ -62,6 +66,23 @@ impl<R: Read + Seek> std::fmt::Debug for OniReader<R> {
             .finish()
     }
 }
+
+/// Every record type OpenNI writes; any other is a damaged header.
+const KNOWN_RECORDS: [u32; 13] = [
+    rt::NODE_ADDED_1_0_0_4,
+    rt::INT_PROPERTY,
+    rt::REAL_PROPERTY,
+    rt::STRING_PROPERTY,
+    rt::GENERAL_PROPERTY,
+    rt::NODE_REMOVED,
+    rt::NODE_DATA_BEGIN,
+    rt::NODE_STATE_READY,
+    rt::NEW_DATA,
+    rt::END,
+    rt::NODE_ADDED_1_0_0_5,
+    rt::NODE_ADDED,
+    rt::SEEK_TABLE,
+];
 
 /// A parsed record header.
 #[derive(Debug, Clone, Copy)]
@@ -147,6 +168,8 @@ impl<R: Read + Seek> OniReader<R> {
             fields: Vec::with_capacity(4096),
             max_payload: 0,
             done: false,
+            frames_read: 0,
+            unknown_records: 0,
         };
         reader.read_description()?;
         Ok(reader)
@@ -347,11 +370,42 @@ impl<R: Read + Seek> OniReader<R> {
                         ));
                     }
                 }
-                rt::NODE_REMOVED if ours => return Err(SourceError::end_of_stream()),
-                rt::END => return Err(SourceError::end_of_stream()),
-                _ => self.skip(h.fields_len + h.payload_len)?,
+                rt::NODE_REMOVED if ours => return Err(self.end_of_stream()),
+                rt::END => return Err(self.end_of_stream()),
+                kind => {
+                    if !KNOWN_RECORDS.contains(&kind) {
+                        self.unknown_records += 1;
+                    }
+                    self.skip(h.fields_len + h.payload_len)?;
+                }
             }
         }
+    }
+
+    /// The end of the stream; a frame count that disagrees with the header's is warned about (a record whose
+    /// header was damaged is skipped, so the file plays fewer frames than it says).
+    fn end_of_stream(&self) -> SourceError {
+        if let Some(declared) = self.info.frames
+            && declared != self.frames_read
+        {
+            tracing::warn!(
+                "{}: the header says {declared} frames but {} played ({} record(s) of unknown type skipped as corrupt)",
+                self.name,
+                self.frames_read,
+                self.unknown_records
+            );
+        }
+        SourceError::end_of_stream()
+    }
+
+    /// Frames of the depth stream returned so far.
+    pub fn frames_read(&self) -> u32 {
+        self.frames_read
+    }
+
+    /// Records skipped so far because their type is none OpenNI writes (a damaged record header).
+    pub fn unknown_records(&self) -> u32 {
+        self.unknown_records
     }
 
     /// Read a record header; `None` at a clean end of file.
@@ -439,6 +493,7 @@ impl<R: Read + Seek> OniReader<R> {
                 return Err(e);
             }
         };
+        self.frames_read += 1;
         DepthFrame::new(
             &self.depth,
             self.info.width,

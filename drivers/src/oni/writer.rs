@@ -93,6 +93,8 @@ pub struct OniWriter<W: Write + Seek = BufWriter<File>> {
     payload: Vec<u8>,
     table: Option<TableEncoder>,
     description: String,
+    /// A write failed: the file is abandoned, not completed on drop.
+    failed: bool,
 }
 
 impl<W: Write + Seek> std::fmt::Debug for OniWriter<W> {
@@ -147,6 +149,7 @@ impl<W: Write + Seek> OniWriter<W> {
             payload: Vec::with_capacity(3 * pixels + 2 * 65_536 + 8),
             table,
             description: "in-memory .oni".into(),
+            failed: false,
         };
         w.write_start()?;
         Ok(w)
@@ -253,7 +256,11 @@ impl<W: Write + Seek> OniWriter<W> {
 
     /// Complete the file (NODE_REMOVED, SEEK_TABLE, END, header patches), flush it and return the writer.
     pub fn finish(mut self) -> Result<W, SourceError> {
-        self.finish_in_place()?;
+        if let Err(e) = self.finish_in_place() {
+            // Reported here; the drop must not try again and log the same failure a second time.
+            self.failed = true;
+            return Err(e);
+        }
         self.out
             .take()
             .ok_or_else(|| SourceError::new(SourceErrorKind::Other, "writer already finished"))
@@ -387,6 +394,8 @@ impl<W: Write + Seek> OniWriter<W> {
         })();
         self.pos += (RECORD_HEADER_LEN + fields.len() + payload.len()) as u64;
         self.fields = fields;
+        // After a failed write the file cannot be completed; the drop must not try again and log a second error.
+        self.failed |= result.is_err();
         result
     }
 }
@@ -394,6 +403,7 @@ impl<W: Write + Seek> OniWriter<W> {
 impl<W: Write + Seek> Drop for OniWriter<W> {
     fn drop(&mut self) {
         if self.out.is_some()
+            && !self.failed
             && let Err(e) = self.finish_in_place()
         {
             tracing::error!("finishing {} on drop failed: {e}", self.description);

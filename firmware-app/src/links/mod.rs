@@ -43,6 +43,7 @@ pub fn sequence_json(a: &SequenceAccounting) -> Value {
         "received": a.received(),
         "lost": a.lost(),
         "out_of_order": a.out_of_order(),
+        "restarts": a.restarts(),
         "per_kind": per_kind,
     })
 }

@@ -12,6 +12,7 @@ use supine_drivers::link::{self, FileMode, Link, LinkOptions, LinkSpec, LinkStat
 use super::{ListenArgs, json};
 use crate::failure::Failure;
 use crate::links;
+use crate::note;
 
 /// How often the counters are reported on stderr while listening.
 const REPORT_EVERY: Duration = Duration::from_secs(5);
@@ -48,11 +49,13 @@ pub fn run(args: &ListenArgs) -> Result<(), Failure> {
 
     let start = Instant::now();
     // A first report as soon as the link is open: tells a human (and a peer script) that listening has begun.
-    eprintln!("{}", report(&*link, &SequenceAccounting::new(), 0, start, None));
+    note!("{}", report(&*link, &SequenceAccounting::new(), 0, start, None));
     let mut last_message = start;
     let mut last_report = start;
     let mut accounting = SequenceAccounting::new();
     let mut messages = 0u64;
+    // A closed pipe or a full disk on stdout: the loop stops and the run ends with that failure.
+    let mut stdout_error: Option<std::io::Error> = None;
     let stdout = std::io::stdout();
     let mut out = stdout.lock();
     let reason = loop {
@@ -68,7 +71,8 @@ pub fn run(args: &ListenArgs) -> Result<(), Failure> {
                 last_message = Instant::now();
                 accounting.observe(&m);
                 let line = json::message(&m);
-                if writeln!(out, "{line}").and_then(|()| out.flush()).is_err() {
+                if let Err(e) = writeln!(out, "{line}").and_then(|()| out.flush()) {
+                    stdout_error = Some(e);
                     break "stdout closed";
                 }
                 continue;
@@ -85,13 +89,19 @@ pub fn run(args: &ListenArgs) -> Result<(), Failure> {
         }
         if now.duration_since(last_report) >= REPORT_EVERY {
             last_report = now;
-            eprintln!("{}", report(&*link, &accounting, messages, start, None));
+            note!("{}", report(&*link, &accounting, messages, start, None));
         }
         link.wait_readable(WAIT_SLICE);
     };
     drop(out);
     let _ = link.close(Duration::from_secs(1));
-    eprintln!("{}", report(&*link, &accounting, messages, start, Some(reason)));
+    note!("{}", report(&*link, &accounting, messages, start, Some(reason)));
+    if let Some(e) = link.last_io_error() {
+        return Err(anyhow::anyhow!("reading {}: {e}", link.describe()).into());
+    }
+    if let Some(e) = stdout_error {
+        return Err(crate::console::stdout_failure(e));
+    }
     Ok(())
 }
 

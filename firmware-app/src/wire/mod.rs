@@ -59,7 +59,7 @@ pub struct SendArgs {
     #[arg(long)]
     pub sink: String,
     /// How many rounds of the sample set to send (default: one round).
-    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    #[arg(long, default_value_t = 1, value_parser = crate::numbers::positive_u32)]
     pub count: u32,
     /// Rounds per second.
     #[arg(long, default_value_t = 30.0)]
@@ -73,7 +73,7 @@ pub struct ListenArgs {
     #[arg(long)]
     pub link: String,
     /// Stop after this many decoded messages (default: run until interrupted or the link ends).
-    #[arg(long)]
+    #[arg(long, value_parser = crate::numbers::positive_u64)]
     pub count: Option<u64>,
     /// Stop after this many seconds without any message.
     #[arg(long)]

@@ -26,15 +26,12 @@ pub fn run(args: &SampleArgs) -> Result<(), Failure> {
         .try_for_each(|m| write_message(&mut out, m, args.format));
     match written.and_then(|()| Ok(out.flush()?)) {
         Ok(()) => Ok(()),
-        // `supine wire sample | head` closing the pipe early is not a failure.
-        Err(e) if is_broken_pipe(&e) => Ok(()),
-        Err(e) => Err(e.context("writing samples to stdout").into()),
+        // `supine wire sample | head` closing the pipe early: quiet, with the status of a SIGPIPE death.
+        Err(e) => match e.downcast::<std::io::Error>() {
+            Ok(io) => Err(crate::console::stdout_failure(io)),
+            Err(e) => Err(e.context("writing samples to stdout").into()),
+        },
     }
-}
-
-fn is_broken_pipe(e: &anyhow::Error) -> bool {
-    e.downcast_ref::<std::io::Error>()
-        .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
 }
 
 fn write_message(out: &mut impl Write, m: &Message, format: Format) -> anyhow::Result<()> {

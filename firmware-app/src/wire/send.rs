@@ -12,6 +12,7 @@ use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use super::SendArgs;
 use crate::failure::Failure;
 use crate::links;
+use crate::note;
 
 /// Slowest accepted `--rate` (one round a day).
 const MIN_RATE_HZ: f64 = 1.0 / 86_400.0;
@@ -30,13 +31,14 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
     // Bounded so that the period and every round's due time stay representable (no Duration overflow).
     if !(args.rate.is_finite() && (MIN_RATE_HZ..=MAX_RATE_HZ).contains(&args.rate)) {
         return Err(Failure::usage(format!(
-            "--rate: {} is not a rate between {MIN_RATE_HZ} and {MAX_RATE_HZ} rounds per second",
+            "--rate: {} is out of range (1/86400 = {MIN_RATE_HZ:.9} to {MAX_RATE_HZ:.0} rounds per second)",
             args.rate
         )));
     }
     let period = Duration::from_secs_f64(1.0 / args.rate);
     links::catch_interrupts().map_err(|e| anyhow::anyhow!("installing the SIGINT handler: {e}"))?;
     let mut link = link::open(&spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("{e}"))?;
+    tracing::info!(link = link.describe(), rounds = args.count, "link open, sending");
 
     let start = Instant::now();
     let mut rounds = 0u32;
@@ -72,7 +74,7 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
     let closed = link.close(CLOSE_TIMEOUT);
     let c = link.counters();
     let elapsed = start.elapsed().as_secs_f64();
-    eprintln!(
+    note!(
         "supine wire send: {} round(s) to {} in {:.2} s: {} messages sent, {} dropped, {} reconnects{}",
         rounds,
         link.describe(),
@@ -96,7 +98,21 @@ pub fn run(args: &SendArgs) -> Result<(), Failure> {
         "closed_cleanly": closed.is_ok(),
         "counters": links::counters_json(&c),
     });
-    eprintln!("{summary}");
+    note!("{summary}");
+    // A sink whose writes failed (ENOSPC, EIO, ...) makes the run fail, naming the OS error once.
+    if let Some(e) = link.last_io_error() {
+        if link.describe() == "stdout" && e.contains("(os error 32)") {
+            return Err(Failure::BrokenPipe);
+        }
+        return Err(anyhow::anyhow!(
+            "writing to {}: {e} ({} write error(s), {} of {} messages not delivered)",
+            link.describe(),
+            c.io_errors,
+            c.queued.saturating_sub(c.sent),
+            c.queued
+        )
+        .into());
+    }
     if encode_failures > 0 {
         return Err(anyhow::anyhow!(
             "{encode_failures} message(s) could not be encoded for {}",

@@ -1,6 +1,6 @@
 //! `supine-models dataset`: argument parsing, validation, progress bar and JSON summary around [`super::generate`].
 
-use super::{DatasetConfig, generate};
+use super::{DatasetConfig, generate, split_train_count};
 use crate::render::noise::KinectNoise;
 use crate::scene::model_body::{BodyKind, open_source};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -89,6 +89,9 @@ pub fn run(args: DatasetArgs) -> ExitCode {
     if args.threads == Some(0) {
         return usage("--threads must be at least 1");
     }
+    if let Err(msg) = check_split(args.bodies, args.train_fraction) {
+        return usage(&msg);
+    }
     match run_inner(&args) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
@@ -96,6 +99,20 @@ pub fn run(args: DatasetArgs) -> ExitCode {
             ExitCode::from(1)
         }
     }
+}
+
+/// Refuse a split that leaves the train or the test part without a body: a model trained on nothing, or figures
+/// measured on nothing, would only look like results.
+fn check_split(bodies: u32, train_fraction: f32) -> Result<(), String> {
+    let n_train = split_train_count(bodies, train_fraction);
+    let n_test = bodies as usize - n_train;
+    if n_train == 0 || n_test == 0 {
+        return Err(format!(
+            "--train-fraction {train_fraction} of --bodies {bodies} gives {n_train} training and {n_test} test \
+             bodies; both splits need at least one body"
+        ));
+    }
+    Ok(())
 }
 
 fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {

@@ -458,11 +458,16 @@ pub fn generate_body(
     Ok(())
 }
 
+/// How many of `n` bodies go to the training split at `train_fraction`.
+pub fn split_train_count(n: u32, train_fraction: f32) -> usize {
+    (((n as f32) * train_fraction).round() as usize).min(n as usize)
+}
+
 /// Split body indices `0..n` 70/30 (by `train_fraction`) with a seeded shuffle; both lists sorted.
 pub fn split_bodies(n: u32, train_fraction: f32, seed: u64) -> (Vec<u32>, Vec<u32>) {
     let mut idx: Vec<u32> = (0..n).collect();
     idx.shuffle(&mut ChaCha8Rng::seed_from_u64(mix_seed(seed, u64::MAX)));
-    let n_train = ((n as f32) * train_fraction).round() as usize;
+    let n_train = split_train_count(n, train_fraction);
     let (mut train, mut test) = (idx[..n_train].to_vec(), idx[n_train..].to_vec());
     train.sort_unstable();
     test.sort_unstable();
@@ -479,6 +484,13 @@ pub fn generate(
     ensure!(
         cfg.views > 0 && cfg.bodies > 0,
         "need at least one body and one view"
+    );
+    let n_train = split_train_count(cfg.bodies, cfg.train_fraction);
+    ensure!(
+        n_train > 0 && n_train < cfg.bodies as usize,
+        "a train fraction of {} over {} bodies leaves the train or the test split empty",
+        cfg.train_fraction,
+        cfg.bodies
     );
     std::fs::create_dir_all(dir.join("bodies")).with_context(|| format!("creating {}", dir.display()))?;
     if cfg.previews > 0 {
