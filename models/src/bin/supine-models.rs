@@ -20,6 +20,15 @@ enum Command {
     Dataset(supine_models::dataset::cli::DatasetArgs),
     /// Render a 30 Hz tracking sequence (breathing, slow motion, optional robot arm) to DIR/sequence.oni + truth.jsonl
     Sequence(supine_models::sequence::cli::SequenceArgs),
+    /// Evaluate against generated ground truth
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// `supine calibrate`'s session on calibration sequences: extrinsic error for 6, 10, 20 poses
+    Calibration(supine_models::eval::calibration::CalibrationEvalArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +38,7 @@ fn main() -> std::process::ExitCode {
         Command::Body(a) => supine_models::body::cli::run_body(&a),
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
+        Command::Eval(EvalCommand::Calibration(a)) => return supine_models::eval::calibration::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
