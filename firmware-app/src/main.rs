@@ -3,6 +3,7 @@
 //! Commands follow the contract in the README (`supine --help`): exit 0 on success, 1 on a runtime failure,
 //! 2 on bad usage; errors name the bad argument or file.
 
+mod calibrate;
 mod demo;
 mod failure;
 mod info;
@@ -29,6 +30,8 @@ struct Cli {
 enum Command {
     /// The main job on the committed synthetic recording: the whole pipeline as far as it is built, then a table.
     Demo(demo::DemoArgs),
+    /// Camera-to-robot extrinsic from arm states paired with the probe tip seen in depth (or from recorded pairs).
+    Calibrate(calibrate::CalibrateArgs),
     /// Record a depth stream to an .oni file (plays in libOpenNI2 and `supine replay`).
     Record(record::RecordArgs),
     /// Show the models, depth devices and links this build and machine offer.
@@ -59,6 +62,7 @@ fn main() -> std::process::ExitCode {
     init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Record(args) => record::run(args),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),

@@ -22,3 +22,11 @@ pub use pairing::{ArmHistory, ArmSample, DwellCollector, Match, PoseObservation}
 pub use session::{FrameOutcome, Session, SessionConfig, SessionStats};
 pub use solve::{Pair, Solution, SolveError, SolveOptions, WARN_CONDITION, solve};
 pub use tip::{ProbeShape, TipDetection, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
+
+/// The unit quaternion `[w, x, y, z]` (normalised); `None` when it is zero or not finite.
+pub fn unit_quaternion_wxyz(wxyz: [f32; 4]) -> Option<crate::geometry::UnitQuaternion> {
+    let [w, x, y, z] = wxyz;
+    let q = nalgebra::Quaternion::new(w, x, y, z);
+    let n = q.norm();
+    (n.is_finite() && n > 1e-6).then(|| crate::geometry::UnitQuaternion::from_quaternion(q))
+}

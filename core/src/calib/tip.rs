@@ -266,12 +266,16 @@ pub fn detect_tip<const N: usize>(
     while end + 1 < used_bins && (hist[end + 1] > 0 || (end + 2 < used_bins && hist[end + 2] > 0)) {
         end += 1;
     }
+    // Mass beyond the run is cut off; it is only ambiguous when it starts within 3 cm of the run's end, too close
+    // to tell the tip from what it nearly touches.
     let beyond: u32 = hist[end + 1..used_bins].iter().sum();
-    if beyond as usize > 10.max(n / 10) {
+    let near: u32 = hist[end + 1..(end + 4).min(used_bins)].iter().sum();
+    if near > 0 && beyond as usize > 10.max(n / 10) {
         return Err(TipError::Ambiguous {
             reason: "another surface lies just ahead of the probe (patient, bed or hand)",
         });
     }
+    let beyond = if near > 0 { beyond } else { 0 };
     let s_end = s_lo + (end + 1) as f32 * BIN_M;
 
     // Three rounds: tip along the axis from the far end of the points, across it from the box fit of the head.

@@ -8,9 +8,12 @@ const PANEL_W: f32 = 260.0;
 const PANEL_H: f32 = 200.0;
 const MARGIN: f32 = 50.0;
 
+/// One panel: title, the value it plots, its target line (NaN: none).
+type Panel = (&'static str, fn(&Outcome) -> Option<f32>, f32);
+
 /// The figure as an SVG document.
 pub fn calibration_svg(outcomes: &[Outcome]) -> String {
-    let panels: [(&str, fn(&Outcome) -> Option<f32>, f32); 3] = [
+    let panels: [Panel; 3] = [
         (
             "translation error (mm), target 5",
             |o| o.translation_error_mm,

@@ -392,3 +392,128 @@ pub fn generate_calibration(
         .with_context(|| format!("finishing {}", oni_path.display()))?;
     Ok(meta)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::calibration::{read_arm_capture, run_session, solve_poses};
+    use crate::scene::body::Mannequin;
+    use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
+    use supine_core::calib::{SessionConfig, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
+    use supine_core::depth::DepthFrame;
+
+    fn generate(name: &str, frames: u32, seed: u64, patient: bool) -> (std::path::PathBuf, CalibrationMeta) {
+        let dir = std::env::temp_dir().join(format!("supine-cal-{name}-{}", std::process::id()));
+        let cfg = SequenceConfig::new(frames, seed, false);
+        let cal = CalibrationConfig {
+            patient,
+            ..Default::default()
+        };
+        let meta = generate_calibration(&Mannequin, &cfg, &cal, &dir, &mut |_, _| {}).unwrap();
+        (dir, meta)
+    }
+
+    #[test]
+    fn the_tip_is_found_in_a_rendered_frame_and_refused_where_there_is_none() {
+        let (dir, meta) = generate("tip", 48, 5, true);
+        let truth = meta.robot_base_from_camera.to_isometry();
+        let lines: Vec<CalibrationFrameTruth> = std::fs::read_to_string(dir.join("truth.jsonl"))
+            .unwrap()
+            .lines()
+            .map(|l| serde_json::from_str(l).unwrap())
+            .collect();
+        let mut reader = supine_drivers::oni::OniReader::open(dir.join("sequence.oni")).unwrap();
+        let k = Intrinsics::KINECT_V1;
+        let mut scratch: Box<TipScratch<8192>> = Box::new(TipScratch::new());
+        let mut errors = Vec::new();
+        for t in &lines {
+            let frame = reader.read_frame().unwrap();
+            if t.pose.is_none() {
+                continue;
+            }
+            let m = t.camera_from_probe;
+            let tip = Point3::new(m[0][3], m[1][3], m[2][3]);
+            let rot = nalgebra::Matrix3::new(
+                m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+            );
+            // The prior is 3 cm off, as a rough guess would put it.
+            let prior = TipPrior {
+                tip_camera: tip + Vector3::new(0.02, -0.015, 0.015),
+                camera_from_probe: UnitQuaternion::from_matrix(&rot),
+                uncertainty_m: 0.05,
+            };
+            if let Ok(d) = detect_tip(&frame, &k, &prior, &TipOptions::default(), &mut scratch) {
+                errors.push((d.tip_camera - tip).norm());
+            }
+            // Nothing there: a prior 40 cm to the side finds no probe (or only refusals).
+            let away = TipPrior {
+                tip_camera: tip + truth.inverse().rotation * Vector3::new(0.0, 0.4, 0.0),
+                ..prior
+            };
+            let e = detect_tip(&frame, &k, &away, &TipOptions::default(), &mut scratch);
+            assert!(
+                e.is_err() || (e.unwrap().tip_camera - tip).norm() > 0.1,
+                "a tip where there is none"
+            );
+        }
+        assert!(errors.len() >= 20, "{} detections", errors.len());
+        errors.sort_by(f32::total_cmp);
+        let median = errors[errors.len() / 2];
+        assert!(median < 0.005, "median tip error {median} m");
+        // An empty frame: no probe.
+        let empty = vec![0u16; k.width as usize * k.height as usize];
+        let frame = DepthFrame::new(&empty, k.width, k.height, Timestamp::default(), 0).unwrap();
+        let prior = TipPrior {
+            tip_camera: Point3::new(0.0, 0.0, 1.0),
+            camera_from_probe: UnitQuaternion::identity(),
+            uncertainty_m: 0.05,
+        };
+        assert!(matches!(
+            detect_tip(&frame, &k, &prior, &TipOptions::default(), &mut scratch),
+            Err(TipError::NoProbe { .. })
+        ));
+        let behind = TipPrior {
+            tip_camera: Point3::new(0.0, 0.0, -1.0),
+            ..prior
+        };
+        assert_eq!(
+            detect_tip(&frame, &k, &behind, &TipOptions::default(), &mut scratch),
+            Err(TipError::OutOfView)
+        );
+        std::fs::remove_dir_all(&dir).ok();
+    }
+
+    #[test]
+    fn a_short_empty_bed_sequence_calibrates_and_late_arm_states_do_not() {
+        let (dir, meta) = generate("session", 96, 7, false);
+        assert_eq!(meta.poses_robot_base.len(), 8);
+        let truth = meta.robot_base_from_camera.to_isometry();
+        let nominal = meta.robot_base_from_camera_nominal.to_isometry();
+        let (arm, errors) = read_arm_capture(&dir.join("arm.cobs")).unwrap();
+        assert_eq!(errors, 0);
+        assert!(arm.len() >= 320, "{} arm states", arm.len());
+        let oni = dir.join("sequence.oni");
+        let (poses, stats) = run_session(&oni, &arm, SessionConfig::new(nominal), 8).unwrap();
+        assert!(poses.len() >= 5, "{} poses, {stats:?}", poses.len());
+        let s = solve_poses(&poses).unwrap();
+        let te = translation_error_m(&s.robot_base_from_camera, &truth);
+        let re = rotation_error_deg(&s.robot_base_from_camera, &truth);
+        assert!(
+            te < 0.02 && re < 1.0,
+            "{te} m, {re} deg from {} poses",
+            poses.len()
+        );
+        // The arm's clock 3 s late: every frame is out of time, no pose comes out.
+        let late: Vec<_> = arm
+            .iter()
+            .map(|a| supine_core::calib::ArmSample {
+                time: a.time.offset_by(3_000_000),
+                ..*a
+            })
+            .collect();
+        let (poses, stats) = run_session(&oni, &late, SessionConfig::new(nominal), 8).unwrap();
+        assert!(poses.is_empty());
+        assert!(stats.out_of_time >= 80, "{stats:?}");
+        std::fs::remove_dir_all(&dir).ok();
+    }
+}
