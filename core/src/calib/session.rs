@@ -37,7 +37,7 @@ pub struct SessionConfig {
 }
 
 impl SessionConfig {
-    /// Defaults around a guess: 6 cm uncertainty, the synthetic probe, 20 ms matching, 40 ms settle, 2 mm still.
+    /// Defaults around a guess: 6 cm uncertainty, the synthetic probe, 20 ms matching, 40 ms settle, 4 mm still (the wire carries whole millimetres).
     pub fn new(robot_base_from_camera_guess: Isometry3) -> Self {
         SessionConfig {
             robot_base_from_camera_guess,
@@ -45,7 +45,7 @@ impl SessionConfig {
             tip: TipOptions::default(),
             max_offset_us: 20_000,
             settle_us: 40_000,
-            still_m: 0.002,
+            still_m: 0.004,
         }
     }
 }

@@ -36,10 +36,7 @@ mod tests {
              printf(\"sizeof_timespec %ld\\n\", (long)sizeof(struct timespec));\n\
              printf(\"CLOCK_MONOTONIC %ld\\n\", (long)CLOCK_MONOTONIC);\n return 0; }\n",
         );
-        assert_eq!(
-            probe["sizeof_timespec"],
-            size_of::<libc::timespec>() as i64
-        );
+        assert_eq!(probe["sizeof_timespec"], size_of::<libc::timespec>() as i64);
         assert_eq!(probe["CLOCK_MONOTONIC"], libc::CLOCK_MONOTONIC as i64);
     }
 }
