@@ -171,15 +171,12 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
             frames_still: 0,
             frames_no_tip: 0,
         };
-        if first.len() < n {
-            o.refused = Some(format!("only {} poses detected", first.len()));
-            out.push(o);
-            continue;
-        }
-        let pass1 = match solve_poses(&first[..n]) {
+        // The first pass only has to give a better prior: it may use fewer poses than asked for (some are lost to
+        // the rough guess); the second pass must deliver all `n`.
+        let pass1 = match solve_poses(&first[..n.min(first.len())]) {
             Ok(s) => s,
             Err(e) => {
-                o.refused = Some(e.to_string());
+                o.refused = Some(format!("first pass: {e}"));
                 out.push(o);
                 continue;
             }
@@ -191,11 +188,12 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
         let (second, stats) = run_session(&oni, &arm, config, n)?;
         o.frames_still = stats.still;
         o.frames_no_tip = stats.no_probe + stats.ambiguous;
-        let sol = if second.len() >= n {
-            solve_poses(&second[..n])
-        } else {
-            Ok(pass1)
-        };
+        if second.len() < n {
+            o.refused = Some(format!("only {} poses detected", second.len()));
+            out.push(o);
+            continue;
+        }
+        let sol = solve_poses(&second[..n]);
         match sol {
             Ok(s) => {
                 let t = s.robot_base_from_camera;
