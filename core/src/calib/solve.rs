@@ -34,10 +34,14 @@ pub struct SolveOptions {
     pub max_condition: f32,
     /// Reweighting rounds of the refinement.
     pub refine_iterations: u32,
+    /// Largest accepted RMS residual over the inliers, metres: good detections agree to 1–3 mm, a consensus
+    /// looser than this is more likely a coincidence of bad ones.
+    pub max_rms_residual_m: f32,
 }
 
 impl Default for SolveOptions {
-    /// 10 mm inlier threshold, 2000 hypotheses, at least 4 pairs, condition up to 30, 5 refinement rounds.
+    /// 10 mm inlier threshold, 2000 hypotheses, at least 4 pairs, condition up to 30, 5 refinement rounds, RMS
+    /// residual up to 5 mm.
     fn default() -> Self {
         SolveOptions {
             inlier_threshold_m: 0.010,
@@ -46,6 +50,7 @@ impl Default for SolveOptions {
             min_pairs: 4,
             max_condition: 30.0,
             refine_iterations: 5,
+            max_rms_residual_m: 0.005,
         }
     }
 }
@@ -95,6 +100,13 @@ pub enum SolveError {
         /// Pairs needed.
         needed: usize,
     },
+    /// The inliers agree too loosely (RMS residual above the limit).
+    ResidualTooLarge {
+        /// RMS residual found, metres.
+        rms_m: f32,
+        /// The limit, metres.
+        limit_m: f32,
+    },
     /// A point is NaN or infinite.
     NonFinite,
     /// The residual or inlier buffer is shorter than the pair list.
@@ -120,6 +132,13 @@ impl fmt::Display for SolveError {
                 f,
                 "only {inliers} pairs agree on one transform, {needed} needed: detections or arm states are \
                  inconsistent"
+            ),
+            SolveError::ResidualTooLarge { rms_m, limit_m } => write!(
+                f,
+                "the poses agree only to {:.1} mm RMS (limit {:.1} mm): detections or arm states are unreliable; \
+                 collect again",
+                rms_m * 1000.0,
+                limit_m * 1000.0
             ),
             SolveError::NonFinite => f.write_str("a calibration point is not finite"),
             SolveError::BufferTooShort => f.write_str("residual buffer shorter than the pair list"),
@@ -376,6 +395,13 @@ pub fn solve(
     if k < needed {
         return Err(SolveError::TooFewInliers { inliers: k, needed });
     }
+    let rms = libm::sqrtf(sq / k as f32);
+    if rms > options.max_rms_residual_m {
+        return Err(SolveError::ResidualTooLarge {
+            rms_m: rms,
+            limit_m: options.max_rms_residual_m,
+        });
+    }
     let condition = condition_number(
         pairs
             .iter()
@@ -387,7 +413,7 @@ pub fn solve(
     Ok(Solution {
         robot_base_from_camera: t,
         inliers: k,
-        rms_residual_m: libm::sqrtf(sq / k as f32),
+        rms_residual_m: rms,
         max_residual_m: max,
         condition,
     })
@@ -534,6 +560,22 @@ mod tests {
             solve(&pairs[..6], &SolveOptions::default(), &mut r, &mut ok).unwrap_err(),
             SolveError::NonFinite
         );
+    }
+
+    #[test]
+    fn a_loose_consensus_is_refused() {
+        let t = truth();
+        let pts = poses(12);
+        let mut pairs = pairs_for(&pts[..12], &t);
+        let mut rng = SplitMix(5);
+        for p in pairs.iter_mut().take(12) {
+            let f = |rng: &mut SplitMix| (rng.below(2001) as f32 - 1000.0) * 8e-6;
+            p.camera += Vector3::new(f(&mut rng), f(&mut rng), f(&mut rng));
+        }
+        let (mut r, mut ok) = ([0.0; 12], [false; 12]);
+        let e = solve(&pairs[..12], &SolveOptions::default(), &mut r, &mut ok).unwrap_err();
+        assert!(matches!(e, SolveError::ResidualTooLarge { .. }), "{e:?}");
+        assert!(e.to_string().contains("RMS"), "{e}");
     }
 
     #[test]

@@ -93,8 +93,12 @@ fn reader_intrinsics(_reader: &OniReader) -> Intrinsics {
     Intrinsics::KINECT_V1
 }
 
-/// Solve from poses.
-pub fn solve_poses(poses: &[PoseObservation]) -> Result<Solution, supine_core::calib::SolveError> {
+/// Solve from poses with the default options (`lenient`: no residual limit, for a first pass that only has to
+/// improve the prior).
+pub fn solve_poses(
+    poses: &[PoseObservation],
+    lenient: bool,
+) -> Result<Solution, supine_core::calib::SolveError> {
     let pairs: Vec<Pair> = poses
         .iter()
         .map(|p| Pair {
@@ -103,7 +107,11 @@ pub fn solve_poses(poses: &[PoseObservation]) -> Result<Solution, supine_core::c
         })
         .collect();
     let (mut r, mut ok) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
-    solve(&pairs, &SolveOptions::default(), &mut r, &mut ok)
+    let mut options = SolveOptions::default();
+    if lenient {
+        options.max_rms_residual_m = f32::INFINITY;
+    }
+    solve(&pairs, &options, &mut r, &mut ok)
 }
 
 /// The result of one sequence at one pose count.
@@ -173,7 +181,7 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
         };
         // The first pass only has to give a better prior: it may use fewer poses than asked for (some are lost to
         // the rough guess); the second pass must deliver all `n`.
-        let pass1 = match solve_poses(&first[..n.min(first.len())]) {
+        let pass1 = match solve_poses(&first[..n.min(first.len())], true) {
             Ok(s) => s,
             Err(e) => {
                 o.refused = Some(format!("first pass: {e}"));
@@ -193,7 +201,7 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
             out.push(o);
             continue;
         }
-        let sol = solve_poses(&second[..n]);
+        let sol = solve_poses(&second[..n], false);
         match sol {
             Ok(s) => {
                 let t = s.robot_base_from_camera;

@@ -495,7 +495,7 @@ mod tests {
         let oni = dir.join("sequence.oni");
         let (poses, stats) = run_session(&oni, &arm, SessionConfig::new(nominal), 8).unwrap();
         assert!(poses.len() >= 5, "{} poses, {stats:?}", poses.len());
-        let s = solve_poses(&poses).unwrap();
+        let s = solve_poses(&poses, false).unwrap();
         let te = translation_error_m(&s.robot_base_from_camera, &truth);
         let re = rotation_error_deg(&s.robot_base_from_camera, &truth);
         assert!(
