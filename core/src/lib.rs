@@ -19,6 +19,7 @@
 //! - [`wire`]: the protocol to the arm controller (serial COBS/postcard/CRC-32C, CAN with E2E, SLCAN, candump).
 //! - [`model_file`]: the versioned, checksummed container every model file uses (validated once, borrowed views).
 //! - [`body_model`]: the statistical body model (mean + shape basis, joints, salient points, torso ICP subset).
+//! - [`calib`]: camera-to-robot calibration (probe-tip detection, time pairing, Kabsch/RANSAC solver).
 //! - `fixture` (tests, or the `fixtures` feature): tiny model files written with [`model_file::write`].
 //!
 //! Where the tracker's parts go as they land (each a module of its own, named after what it holds):
@@ -39,6 +40,7 @@
 extern crate std;
 
 pub mod body_model;
+pub mod calib;
 pub mod camera;
 pub mod crc;
 pub mod depth;

@@ -4,6 +4,7 @@
 //! 2 on bad usage; errors name the bad argument or file. A closed stdout pipe (`| head`) ends quietly with 141, the
 //! status of a program killed by SIGPIPE; a failure to write stderr turns a success into exit 1.
 
+mod calibrate;
 mod config;
 mod console;
 mod demo;
@@ -40,6 +41,8 @@ enum Command {
     Demo(demo::DemoArgs),
     /// The service: validate its configuration (`--check-config`); the real-time loop lands with the tracker.
     Run(run::RunArgs),
+    /// Camera-to-robot extrinsic from arm states paired with the probe tip seen in depth (or from recorded pairs).
+    Calibrate(calibrate::CalibrateArgs),
     /// Record a depth stream to an .oni file (plays in libOpenNI2 and `supine replay`).
     Record(record::RecordArgs),
     /// Show the models, depth devices and links this build and machine offer.
@@ -118,6 +121,7 @@ fn main() -> std::process::ExitCode {
     init_tracing(cli.verbose);
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
         Command::Record(args) => record::run(args),
         Command::Run(args) => run::run(args),
         Command::Info(args) => info::run(args),

@@ -6,6 +6,7 @@
 pub mod assets;
 pub mod body;
 pub mod dataset;
+pub mod eval;
 pub mod noise_report;
 pub mod pose;
 pub mod render;

@@ -22,6 +22,15 @@ enum Command {
     Sequence(supine_models::sequence::cli::SequenceArgs),
     /// Compare synthetic depth noise with real Kinect frames (holes, jumps, mixed pixels, angles, steps) [--json, --png]
     NoiseReport(supine_models::noise_report::cli::NoiseReportArgs),
+    /// Evaluate against generated ground truth
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// `supine calibrate`'s session on calibration sequences: extrinsic error for 6, 10, 20 poses
+    Calibration(supine_models::eval::calibration::CalibrationEvalArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -32,6 +41,7 @@ fn main() -> std::process::ExitCode {
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
         Command::NoiseReport(a) => return supine_models::noise_report::cli::run(a),
+        Command::Eval(EvalCommand::Calibration(a)) => return supine_models::eval::calibration::run(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

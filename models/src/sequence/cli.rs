@@ -18,6 +18,13 @@ pub struct SequenceArgs {
     /// Let the robot arm sweep the probe over the torso (occluding up to about half of it).
     #[arg(long)]
     pub occluder: bool,
+    /// A calibration sequence: the arm visits poses above the bed (12 frames each), arm states beside the .oni in
+    /// DIR/arm.cobs, the true extrinsic in DIR/sequence.json.
+    #[arg(long, conflicts_with = "occluder")]
+    pub calibration: bool,
+    /// With --calibration: the bed is empty (default: a still patient lies on it).
+    #[arg(long, requires = "calibration")]
+    pub empty_bed: bool,
     /// Output directory: sequence.oni, truth.jsonl, sequence.json, preview PNGs.
     #[arg(long)]
     pub out: PathBuf,
@@ -61,6 +68,54 @@ pub fn run(args: SequenceArgs) -> ExitCode {
     }
 }
 
+fn progress(frames: u32) -> anyhow::Result<ProgressBar> {
+    let bar = ProgressBar::with_draw_target(Some(frames as u64), ProgressDrawTarget::stderr());
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames  {per_sec}  eta {eta}")
+            .map_err(|e| anyhow::anyhow!("progress template: {e}"))?
+            .progress_chars("=> "),
+    );
+    Ok(bar)
+}
+
+fn run_calibration(
+    args: &SequenceArgs,
+    source: &dyn crate::scene::body::BodySource,
+    cfg: &SequenceConfig,
+) -> anyhow::Result<()> {
+    let cal = super::calibration::CalibrationConfig {
+        patient: !args.empty_bed,
+        ..Default::default()
+    };
+    let bar = progress(args.frames)?;
+    let meta =
+        super::calibration::generate_calibration(source, cfg, &cal, &args.out, &mut |_, _| bar.inc(1))?;
+    bar.finish();
+    eprintln!(
+        "{} frames, {} poses ({}) in {}; arm latency {} ms",
+        args.frames,
+        meta.poses_robot_base.len(),
+        if cal.patient { "still patient" } else { "empty bed" },
+        args.out.display(),
+        meta.arm_latency_us as f32 / 1000.0
+    );
+    if let Some(path) = &args.json {
+        let v = serde_json::json!({
+            "command": "sequence",
+            "calibration": true,
+            "seed": args.seed,
+            "frames": args.frames,
+            "poses": meta.poses_robot_base.len(),
+            "patient": cal.patient,
+            "body_source": source.name(),
+            "out": args.out,
+        });
+        std::fs::write(path, serde_json::to_vec_pretty(&v)?)
+            .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
 fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     let source = open_source(args.body, args.body_model.as_deref())?;
     let base = SequenceConfig::new(args.frames, args.seed, args.occluder);
@@ -75,6 +130,9 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         },
         ..base
     };
+    if args.calibration {
+        return run_calibration(args, source.as_ref(), &cfg);
+    }
     let bar = ProgressBar::with_draw_target(Some(args.frames as u64), ProgressDrawTarget::stderr());
     bar.set_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames  {per_sec}  eta {eta}")

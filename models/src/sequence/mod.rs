@@ -9,6 +9,7 @@
 //! Cost per frame: one LBS (body source), one render, a second draw of the arm to measure occlusion, full-frame
 //! noise, one 16zT encode: ~20–40 ms on one core. Frames are produced in order and streamed to disk.
 
+pub mod calibration;
 pub mod cli;
 
 use crate::body::PosedBody;
@@ -87,6 +88,9 @@ pub struct SequenceMeta {
     pub bed: BedParams,
     /// Floor, mattress and head-section planes in the camera frame.
     pub planes_camera: [Plane; 3],
+    /// Calibration sequences (`--calibration`): the true extrinsic, the nominal guess, the poses.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub calibration: Option<calibration::CalibrationMeta>,
 }
 
 /// Ground truth of one frame (`truth.jsonl`).
@@ -214,6 +218,7 @@ pub fn generate(
         view,
         bed,
         planes_camera: scene0.planes_world().map(|p| p.transformed(&cfw)),
+        calibration: None,
     };
     std::fs::write(dir.join("sequence.json"), serde_json::to_vec_pretty(&meta)?)?;
     let oni_path = dir.join("sequence.oni");

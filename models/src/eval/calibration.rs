@@ -1,0 +1,355 @@
+//! `supine-models eval calibration --data DIR [--json FILE] [--svg FILE]`: run the calibration session of
+//! `supine calibrate` (`supine_core::calib`) over calibration sequences (`sequence --calibration`) and compare the
+//! recovered `robot_base_from_camera` with the truth in `sequence.json`, for the first 6, 10 and 20 poses, with and
+//! without a patient on the bed, and how the error moves points on the torso (probe-mapping error).
+//!
+//! Two passes per pose count, as an integrator would run it: the nominal guess (the mount drawing, in
+//! `sequence.json`) as the detector's prior, then the first pass's result as the prior of the second.
+//! Cost: one .oni decode and one tip detection per frame and pass (~5 ms a frame).
+
+use anyhow::{Context, Result, bail};
+use nalgebra::Point3;
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
+use supine_core::calib::{
+    ArmSample, Pair, PoseObservation, Session, SessionConfig, SessionStats, Solution, SolveOptions, solve,
+};
+use supine_core::camera::Intrinsics;
+use supine_core::geometry::Isometry3;
+use supine_core::wire::stream::SerialDecoder;
+use supine_drivers::SourceErrorKind;
+use supine_drivers::oni::OniReader;
+
+use crate::sequence::SequenceMeta;
+
+/// Pose counts the report covers (keys of the JSON report).
+pub const POSE_COUNTS: [usize; 3] = [6, 10, 20];
+/// Prior uncertainty of the second pass, metres.
+pub const REFINED_UNCERTAINTY_M: f32 = 0.02;
+
+/// Arguments of `supine-models eval calibration`.
+#[derive(Debug, clap::Args)]
+pub struct CalibrationEvalArgs {
+    /// A calibration sequence directory, or a folder of them.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Write the report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the figure (errors against pose count, with and without a patient) here as SVG.
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+}
+
+/// A session as the command runs it: 2048 arm states (20 s at 100 Hz), 64 poses, 8192 detection points.
+pub type CalibrationSession = Session<2048, 64, 8192>;
+
+/// The arm states of a serial capture (`arm.cobs`), in file order.
+pub fn read_arm_capture(path: &Path) -> Result<(Vec<ArmSample>, u64)> {
+    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut decoder: SerialDecoder = SerialDecoder::new();
+    let mut out = Vec::new();
+    decoder.feed_all(&bytes, |m| out.extend(ArmSample::from_message(&m)));
+    Ok((out, decoder.stats().errors() as u64))
+}
+
+/// Run one session over a recording: frames of `oni` and arm states interleaved by time as a live link would
+/// deliver them. Returns the poses and the counters.
+pub fn run_session(
+    oni: &Path,
+    arm: &[ArmSample],
+    config: SessionConfig,
+    max_poses: usize,
+) -> Result<(Vec<PoseObservation>, SessionStats)> {
+    let mut reader = OniReader::open(oni).with_context(|| format!("opening {}", oni.display()))?;
+    let k = reader_intrinsics(&reader);
+    let mut session = Box::new(CalibrationSession::new(config));
+    let mut next_arm = 0;
+    loop {
+        let frame = match reader.read_frame() {
+            Ok(f) => f,
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e) => bail!("reading {}: {e}", oni.display()),
+        };
+        while next_arm < arm.len() && arm[next_arm].time <= frame.capture {
+            session.on_arm(arm[next_arm]);
+            next_arm += 1;
+        }
+        session.on_frame(&frame, &k);
+        if session.pose_count() >= max_poses {
+            break;
+        }
+    }
+    for s in &arm[next_arm..] {
+        session.on_arm(*s);
+    }
+    session.finish();
+    Ok((session.poses().take(max_poses).collect(), *session.stats()))
+}
+
+fn reader_intrinsics(_reader: &OniReader) -> Intrinsics {
+    // The sequences are rendered with the Kinect v1 intrinsics (sequence.json says so too).
+    Intrinsics::KINECT_V1
+}
+
+/// Solve from poses with the default options (`lenient`: no residual limit, for a first pass that only has to
+/// improve the prior).
+pub fn solve_poses(
+    poses: &[PoseObservation],
+    lenient: bool,
+) -> Result<Solution, supine_core::calib::SolveError> {
+    let pairs: Vec<Pair> = poses
+        .iter()
+        .map(|p| Pair {
+            robot_base: p.robot_base,
+            camera: p.camera,
+        })
+        .collect();
+    let (mut r, mut ok) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
+    let mut options = SolveOptions::default();
+    if lenient {
+        options.max_rms_residual_m = f32::INFINITY;
+    }
+    solve(&pairs, &options, &mut r, &mut ok)
+}
+
+/// The result of one sequence at one pose count.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct Outcome {
+    /// Sequence directory.
+    pub sequence: String,
+    /// Patient on the bed.
+    pub patient: bool,
+    /// Poses asked for.
+    pub poses: usize,
+    /// Poses used (inliers).
+    pub inliers: usize,
+    /// Translation error, mm (`None`: refused).
+    pub translation_error_mm: Option<f32>,
+    /// Rotation error, degrees.
+    pub rotation_error_deg: Option<f32>,
+    /// RMS residual over the inliers, mm.
+    pub residual_mm: Option<f32>,
+    /// Mean displacement of the torso points (hip centre, belly, shoulder centre) mapped with the estimate
+    /// instead of the truth, mm: the error it adds to probe mapping at the torso.
+    pub torso_mapping_error_mm: Option<f32>,
+    /// Condition number of the pose set.
+    pub condition: Option<f32>,
+    /// Why no extrinsic came out.
+    pub refused: Option<String>,
+    /// Frame counters of the second pass.
+    pub frames_still: u32,
+    /// Frames without a tip.
+    pub frames_no_tip: u32,
+}
+
+/// Evaluate one sequence directory at every pose count.
+pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
+    let meta: SequenceMeta = serde_json::from_slice(
+        &std::fs::read(dir.join("sequence.json"))
+            .with_context(|| format!("reading {}/sequence.json", dir.display()))?,
+    )
+    .with_context(|| format!("parsing {}/sequence.json", dir.display()))?;
+    let Some(cal) = meta.calibration else {
+        bail!(
+            "{} is not a calibration sequence (no `calibration` in sequence.json)",
+            dir.display()
+        );
+    };
+    let truth = cal.robot_base_from_camera.to_isometry();
+    let nominal = cal.robot_base_from_camera_nominal.to_isometry();
+    let (arm, _) = read_arm_capture(&dir.join("arm.cobs"))?;
+    let oni = dir.join("sequence.oni");
+    let max = *POSE_COUNTS.iter().max().unwrap_or(&20);
+    let (first, _) = run_session(&oni, &arm, SessionConfig::new(nominal), max)?;
+    let mut out = Vec::new();
+    for &n in &POSE_COUNTS {
+        let mut o = Outcome {
+            sequence: dir.display().to_string(),
+            patient: cal.config.patient,
+            poses: n,
+            inliers: 0,
+            translation_error_mm: None,
+            rotation_error_deg: None,
+            residual_mm: None,
+            torso_mapping_error_mm: None,
+            condition: None,
+            refused: None,
+            frames_still: 0,
+            frames_no_tip: 0,
+        };
+        // The first pass only has to give a better prior: it may use fewer poses than asked for (some are lost to
+        // the rough guess); the second pass must deliver all `n`.
+        let pass1 = match solve_poses(&first[..n.min(first.len())], true) {
+            Ok(s) => s,
+            Err(e) => {
+                o.refused = Some(format!("first pass: {e}"));
+                out.push(o);
+                continue;
+            }
+        };
+        let config = SessionConfig {
+            guess_uncertainty_m: REFINED_UNCERTAINTY_M,
+            ..SessionConfig::new(pass1.robot_base_from_camera)
+        };
+        let (second, stats) = run_session(&oni, &arm, config, n)?;
+        o.frames_still = stats.still;
+        o.frames_no_tip = stats.no_probe + stats.ambiguous;
+        if second.len() < n {
+            o.refused = Some(format!("only {} poses detected", second.len()));
+            out.push(o);
+            continue;
+        }
+        let sol = solve_poses(&second[..n], false);
+        match sol {
+            Ok(s) => {
+                let t = s.robot_base_from_camera;
+                o.inliers = s.inliers;
+                o.translation_error_mm = Some(translation_error_m(&t, &truth) * 1000.0);
+                o.rotation_error_deg = Some(rotation_error_deg(&t, &truth));
+                o.residual_mm = Some(s.rms_residual_m * 1000.0);
+                o.condition = Some(s.condition);
+                o.torso_mapping_error_mm = Some(torso_error_mm(&t, &truth, &cal.torso_points_camera));
+            }
+            Err(e) => o.refused = Some(e.to_string()),
+        }
+        out.push(o);
+    }
+    Ok(out)
+}
+
+fn torso_error_mm(est: &Isometry3, truth: &Isometry3, points: &[[f32; 3]]) -> f32 {
+    let sum: f32 = points
+        .iter()
+        .map(|p| {
+            let p = Point3::from(*p);
+            (est * p - truth * p).norm()
+        })
+        .sum();
+    1000.0 * sum / points.len().max(1) as f32
+}
+
+/// The calibration sequences under `data`: itself, or its subdirectories with a calibration `sequence.json`.
+pub fn sequence_dirs(data: &Path) -> Result<Vec<PathBuf>> {
+    if data.join("sequence.json").is_file() {
+        return Ok(vec![data.to_owned()]);
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(data)
+        .with_context(|| format!("reading {}", data.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("sequence.json").is_file() && p.join("arm.cobs").is_file())
+        .collect();
+    dirs.sort();
+    if dirs.is_empty() {
+        bail!(
+            "{} holds no calibration sequence (make one with `supine-models sequence --calibration --out DIR`)",
+            data.display()
+        );
+    }
+    Ok(dirs)
+}
+
+fn mean(v: impl Iterator<Item = f32>) -> Option<f32> {
+    let (n, s) = v.fold((0usize, 0.0f32), |(n, s), x| (n + 1, s + x));
+    (n > 0).then(|| s / n as f32)
+}
+
+fn max(v: impl Iterator<Item = f32>) -> Option<f32> {
+    v.fold(None, |m: Option<f32>, x| Some(m.map_or(x, |m| m.max(x))))
+}
+
+/// The report part for a set of outcomes, keyed by pose count.
+pub fn summarise(outcomes: &[&Outcome]) -> serde_json::Value {
+    let mut obj = serde_json::Map::new();
+    for n in POSE_COUNTS {
+        let at: Vec<&&Outcome> = outcomes.iter().filter(|o| o.poses == n).collect();
+        let solved: Vec<&&&Outcome> = at.iter().filter(|o| o.translation_error_mm.is_some()).collect();
+        let f = |g: fn(&Outcome) -> Option<f32>| solved.iter().filter_map(move |o| g(o));
+        obj.insert(
+            n.to_string(),
+            serde_json::json!({
+                "translation_error_mm": mean(f(|o| o.translation_error_mm)),
+                "rotation_error_deg": mean(f(|o| o.rotation_error_deg)),
+                "residual_mm": mean(f(|o| o.residual_mm)),
+                "torso_mapping_error_mm": mean(f(|o| o.torso_mapping_error_mm)),
+                "translation_error_mm_max": max(f(|o| o.translation_error_mm)),
+                "rotation_error_deg_max": max(f(|o| o.rotation_error_deg)),
+                "sequences": at.len(),
+                "solved": solved.len(),
+            }),
+        );
+    }
+    serde_json::Value::Object(obj)
+}
+
+/// Run the command.
+pub fn run(args: &CalibrationEvalArgs) -> ExitCode {
+    match run_inner(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn run_inner(args: &CalibrationEvalArgs) -> Result<()> {
+    let dirs = sequence_dirs(&args.data)?;
+    let bar = indicatif::ProgressBar::with_draw_target(
+        Some(dirs.len() as u64),
+        indicatif::ProgressDrawTarget::stderr(),
+    );
+    let mut all = Vec::new();
+    for d in &dirs {
+        all.extend(evaluate_sequence(d)?);
+        bar.inc(1);
+    }
+    bar.finish();
+    let refs: Vec<&Outcome> = all.iter().collect();
+    let with: Vec<&Outcome> = all.iter().filter(|o| o.patient).collect();
+    let without: Vec<&Outcome> = all.iter().filter(|o| !o.patient).collect();
+    let mut report = summarise(&refs);
+    report["with_patient"] = summarise(&with);
+    report["empty_bed"] = summarise(&without);
+    report["sequences"] = dirs.len().into();
+    report["per_sequence"] = serde_json::to_value(&all)?;
+    report["commit"] = commit().into();
+    println!(
+        "poses  translation_mm  rotation_deg  residual_mm  torso_mm   (mean over {} sequences)",
+        dirs.len()
+    );
+    for n in POSE_COUNTS {
+        let r = &report[n.to_string()];
+        let g = |k: &str| r[k].as_f64().map_or("-".to_owned(), |v| format!("{v:.2}"));
+        println!(
+            "{n:>5}  {:>14}  {:>12}  {:>11}  {:>8}   solved {}/{}",
+            g("translation_error_mm"),
+            g("rotation_error_deg"),
+            g("residual_mm"),
+            g("torso_mapping_error_mm"),
+            r["solved"],
+            r["sequences"]
+        );
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_vec_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    if let Some(path) = &args.svg {
+        std::fs::write(path, super::figure::calibration_svg(&all))
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// The commit of the working tree, if git knows it.
+fn commit() -> Option<String> {
+    let out = std::process::Command::new("git")
+        .args(["rev-parse", "--short", "HEAD"])
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_owned())
+}
