@@ -41,8 +41,12 @@ pub mod depth;
 pub mod error;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixture;
+pub mod fit;
 pub mod geometry;
+pub mod icp;
 pub mod model_file;
 pub mod salient;
+pub mod shape;
+pub mod spd;
 pub mod time;
 pub mod wire;
