@@ -10,3 +10,4 @@ pub mod pose;
 pub mod render;
 pub mod scene;
 pub mod sequence;
+pub mod shape;

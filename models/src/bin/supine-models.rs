@@ -20,6 +20,25 @@ enum Command {
     Dataset(supine_models::dataset::cli::DatasetArgs),
     /// Render a 30 Hz tracking sequence (breathing, slow motion, optional robot arm) to DIR/sequence.oni + truth.jsonl
     Sequence(supine_models::sequence::cli::SequenceArgs),
+    /// Train a model from a dataset
+    #[command(subcommand)]
+    Train(TrainCommand),
+    /// Evaluate a model on the test split of a dataset
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+#[derive(Subcommand)]
+enum TrainCommand {
+    /// The shape model: canonical-view subspace (randomised SVD) and shape regression forest [default out:
+    /// models/artifacts/shape.ssm]
+    Shape(supine_models::shape::cli::TrainShapeArgs),
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// Shape from one frame (subspace, plain fitting, combined; paper Fig. 5) on the held-out bodies
+    Shape(supine_models::shape::cli::EvalShapeArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +48,8 @@ fn main() -> std::process::ExitCode {
         Command::Body(a) => supine_models::body::cli::run_body(&a),
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
+        Command::Train(TrainCommand::Shape(a)) => supine_models::shape::cli::run_train(&a),
+        Command::Eval(EvalCommand::Shape(a)) => supine_models::shape::cli::run_eval(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
