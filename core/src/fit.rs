@@ -139,8 +139,33 @@ pub fn initial_pose(
     Ok(camera_from_frame * model_from_frame.inverse())
 }
 
+/// Area-weighted outward vertex normals of the shaped torso subset (from its triangles), normalised.
+pub fn subset_normals(body: &BodyModelView<'_>, points: &[[f32; 3]], normals: &mut [[f32; 3]]) {
+    normals.fill([0.0; 3]);
+    let tris = body.torso_subset_triangles();
+    for t in 0..tris.len() / 3 {
+        let ids = [tris.at(3 * t) as usize, tris.at(3 * t + 1) as usize, tris.at(3 * t + 2) as usize];
+        if ids.iter().any(|&i| i >= points.len()) {
+            continue;
+        }
+        let [a, b, c] = ids.map(|i| Vector3::from(points[i]));
+        let n = (b - a).cross(&(c - a));
+        for &i in &ids {
+            for (x, nx) in normals[i].iter_mut().zip(n.iter()) {
+                *x += nx;
+            }
+        }
+    }
+    for n in normals.iter_mut() {
+        let v = Vector3::from(*n);
+        let l = v.norm();
+        *n = if l > 0.0 { (v / l).into() } else { [0.0; 3] };
+    }
+}
+
 /// Alternate rigid ICP and Eq. 7 shape steps from shape `z0` (σ units, also the prior) and pose
-/// `camera_from_model`. `points` is scratch for the shaped torso subset (`body.counts().subset` entries).
+/// `camera_from_model`. `points` and `normals` are scratch for the shaped torso subset and its outward normals
+/// (`body.counts().subset` entries each).
 #[allow(clippy::too_many_arguments)] // the frame, its camera, the model, the start and the scratch are all needed
 pub fn fit_shape(
     body: &BodyModelView<'_>,
@@ -150,7 +175,14 @@ pub fn fit_shape(
     camera_from_model: Isometry3,
     params: &FitParams,
     points: &mut [[f32; 3]],
+    normals: &mut [[f32; 3]],
 ) -> Result<FitResult, FitError> {
+    if normals.len() != points.len() {
+        return Err(FitError::Buffer(BufferLenError {
+            expected: points.len(),
+            found: normals.len(),
+        }));
+    }
     let subset = body.torso_subset();
     let stride = params.stride.max(1) as usize;
     let mut z = *z0;
@@ -162,8 +194,9 @@ pub fn fit_shape(
         rounds += 1;
         body.shape_torso_subset(&raw(body, &z), points)
             .map_err(FitError::Buffer)?;
+        subset_normals(body, points, normals);
         for _ in 0..params.icp_steps {
-            pose = icp::point_to_plane_step(frame, k, points, stride, &pose, &params.icp)
+            pose = icp::point_to_plane_step(frame, k, points, Some(normals), stride, &pose, &params.icp)
                 .map_err(FitError::Icp)?
                 .0;
         }
@@ -171,7 +204,7 @@ pub fn fit_shape(
         let mut a = [[0.0f32; SHAPE_COMPONENTS]; SHAPE_COMPONENTS];
         let mut b = [0.0f32; SHAPE_COMPONENTS];
         let mut basis = [[0.0f32; 3]; SHAPE_COMPONENTS];
-        last = icp::associate(frame, k, points, stride, &pose, &params.icp, |i, _, o, n| {
+        last = icp::associate(frame, k, points, Some(normals), stride, &pose, &params.icp, |i, _, o, n| {
             let v = subset.at(i) as usize;
             let c = model_from_camera * o;
             let n = model_from_camera.rotation * n;

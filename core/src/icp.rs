@@ -140,11 +140,15 @@ pub fn partner(
 }
 
 /// Associate every model point (`points`, model frame, every `stride`-th) moved by `camera_from_model`, calling
-/// `on_pair(index, model point in camera frame, observed point, observed normal)` for each accepted pair.
+/// `on_pair(index, model point in camera frame, observed point, observed normal)` for each accepted pair. With
+/// `normals` (outward model normals, model frame, one per point), points facing away from the camera are skipped:
+/// the camera cannot see them, and their projective partner would be the near surface.
+#[allow(clippy::too_many_arguments)] // the frame, its camera, the model points and the pose are all needed
 pub fn associate(
     frame: &DepthFrame<'_>,
     k: &Intrinsics,
     points: &[[f32; 3]],
+    normals: Option<&[[f32; 3]]>,
     stride: usize,
     camera_from_model: &Isometry3,
     params: &IcpParams,
@@ -153,6 +157,11 @@ pub fn associate(
     let mut a = Association::default();
     for (i, q) in points.iter().enumerate().step_by(stride.max(1)) {
         let p = camera_from_model * Point3::from(*q);
+        if let Some(nm) = normals.and_then(|n| n.get(i)) {
+            if (camera_from_model.rotation * Vector3::from(*nm)).dot(&p.coords) >= 0.0 {
+                continue;
+            }
+        }
         match partner(frame, k, &p, params) {
             Ok(Some((o, n))) => {
                 let r = n.dot(&(p - o));
@@ -168,10 +177,12 @@ pub fn associate(
 }
 
 /// One point-to-plane Gauss-Newton step: the updated `camera_from_model` and the association it was computed from.
+#[allow(clippy::too_many_arguments)] // as `associate`
 pub fn point_to_plane_step(
     frame: &DepthFrame<'_>,
     k: &Intrinsics,
     points: &[[f32; 3]],
+    normals: Option<&[[f32; 3]]>,
     stride: usize,
     camera_from_model: &Isometry3,
     params: &IcpParams,
@@ -179,7 +190,7 @@ pub fn point_to_plane_step(
     let mut a = [[0.0f32; 6]; 6];
     let mut b = [0.0f32; 6];
     // Linearise about the centroid-free camera frame: p' = p + ω × p + t, r' = r + (p × n)·ω + n·t.
-    let assoc = associate(frame, k, points, stride, camera_from_model, params, |_, p, o, n| {
+    let assoc = associate(frame, k, points, normals, stride, camera_from_model, params, |_, p, o, n| {
         let r = n.dot(&(p - o));
         let c = p.coords.cross(n);
         let j = [c.x, c.y, c.z, n.x, n.y, n.z];

@@ -39,6 +39,10 @@ pub struct TrainShapeArgs {
     /// Write the training report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Keep the validation part of the training bodies out of the final forest (score choices with
+    /// `eval shape --split validation`).
+    #[arg(long)]
+    pub holdout_validation: bool,
     /// Write the mean and first eigen-images and a few canonical views (clean, noisy) as PNGs into this folder.
     #[arg(long)]
     pub png: Option<PathBuf>,
@@ -98,6 +102,7 @@ pub fn run_train(a: &TrainShapeArgs) -> Result<()> {
         pixel_noise_m: 0.01,
         trees: a.trees,
         em_rounds: 1,
+        holdout_validation: a.holdout_validation,
     };
     let t = train(&ds, &cfg, a.png.as_deref())?;
     let out = a.out.clone().unwrap_or_else(super::default_artifact_path);
@@ -158,17 +163,18 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
 
 fn print_table(r: &serde_json::Value) {
     println!("torso_coeffs {}   images {}   seed {}   commit {}", r["torso_coeffs"], r["images"], r["seed"], r["commit"]);
-    println!("{:<10} {:>8} {:>44} {:>12} {:>10} {:>9} {:>10}", "method", "frames", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "ms/frame", "rejected");
+    println!("{:<14} {:>4} {:>44} {:>10} {:>7} {:>10} {:>9} {:>9}", "method", "n", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "hip-al. mm", "ms/frame", "rejected");
     for m in ["subspace", "fitting", "combined", "mean_shape"] {
         for (label, j) in [(m.to_string(), &r[m]), (format!("{m}+arm"), &r[m]["with_arm"])] {
             let c: Vec<String> = (0..5).map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN))).collect();
             println!(
-                "{:<14} {:>4} {:>44} {:>12.1} {:>10.1} {:>9.1} {:>10.3}",
+                "{:<14} {:>4} {:>44} {:>10.1} {:>7.1} {:>10.1} {:>9.1} {:>9.3}",
                 label,
                 j["frames"],
                 c.join(" "),
                 j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["vertex_error_mm_sd"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_hip_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["ms_per_frame"].as_f64().unwrap_or(f64::NAN),
                 j["rejected_fraction"].as_f64().unwrap_or(f64::NAN)
             );

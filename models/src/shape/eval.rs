@@ -17,7 +17,7 @@ use supine_core::shape::ShapeModelView;
 use supine_core::time::Timestamp;
 
 use super::data::{ShapeFrame, body_pose, frames_of, intrinsics};
-use crate::body::{BodyModel, BodyPart, Shape};
+use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
 use crate::dataset::Dataset;
 use crate::pose::Pose;
 
@@ -63,14 +63,24 @@ pub struct Stats {
     v_sum: f64,
     v_sq: f64,
     v_n: f64,
+    h_sum: f64,
+    h_sq: f64,
     ms: f64,
     ms_n: usize,
     rejected: usize,
     tried: usize,
+    rms_sum: f64,
+    pairs_sum: f64,
+    occl_sum: f64,
+    fit_n: usize,
 }
 
 impl Stats {
-    fn add(&mut self, est: &[f32; 20], truth: &[f32; 20], vertex_err: &[f32]) {
+    fn add(&mut self, est: &[f32; 20], truth: &[f32; 20], vertex_err: &[f32], hip_err: &[f32]) {
+        for &e in hip_err {
+            self.h_sum += e as f64;
+            self.h_sq += (e as f64).powi(2);
+        }
         self.n += 1;
         for k in 0..20 {
             let e = (est[k] - truth[k]) as f64;
@@ -90,29 +100,37 @@ impl Stats {
         let sd: Vec<f64> = (0..20).map(|k| (self.se[k] / n - (self.sum[k] / n).powi(2)).max(0.0).sqrt()).collect();
         let vm = self.v_sum / self.v_n.max(1.0);
         let vsd = (self.v_sq / self.v_n.max(1.0) - vm * vm).max(0.0).sqrt();
+        let hm = self.h_sum / self.v_n.max(1.0);
+        let hsd = (self.h_sq / self.v_n.max(1.0) - hm * hm).max(0.0).sqrt();
         serde_json::json!({
             "frames": self.n,
+            "vertex_error_hip_mm_mean": hm * 1000.0,
+            "vertex_error_hip_mm_sd": hsd * 1000.0,
             "coeff_nrmse": nrmse,
             "coeff_sd": sd,
             "vertex_error_mm_mean": vm * 1000.0,
             "vertex_error_mm_sd": vsd * 1000.0,
             "ms_per_frame": self.ms / self.ms_n.max(1) as f64,
+            "fit_residual_mm": self.rms_sum / self.fit_n.max(1) as f64 * 1000.0,
+            "fit_pairs": self.pairs_sum / self.fit_n.max(1) as f64,
+            "fit_occluded": self.occl_sum / self.fit_n.max(1) as f64,
             "rejected_fraction": if self.tried > 0 { self.rejected as f64 / self.tried as f64 } else { 0.0 },
         })
     }
 }
 
-/// Upper-body vertex errors (metres) of `est` against the true posed upper body.
-fn vertex_errors(model: &BodyModel, pose: &Pose, est: &[f32; 20], truth_vertices: &[[f32; 3]], mask: &[bool]) -> Vec<f32> {
+/// Upper-body vertex errors (metres) of `est` against the true posed upper body: as posed in the body frame (no
+/// alignment), and with the estimated body moved so its hip centre meets the true one (how the tracker places it).
+fn vertex_errors(model: &BodyModel, pose: &Pose, est: &[f32; 20], truth: &PosedBody<'_>, mask: &[bool]) -> (Vec<f32>, Vec<f32>) {
     let posed = model.pose(&Shape::from_normalised(model, est), pose);
-    posed
-        .vertices
-        .iter()
-        .zip(truth_vertices)
-        .zip(mask)
-        .filter(|(_, m)| **m)
-        .map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm())
-        .collect()
+    let hip = |b: &PosedBody<'_>| {
+        (Vector3::from(b.salient_points[SalientPoint::LeftHip.index()]) + Vector3::from(b.salient_points[SalientPoint::RightHip.index()])) * 0.5
+    };
+    let shift = hip(truth) - hip(&posed);
+    let pairs = posed.vertices.iter().zip(&truth.vertices).zip(mask).filter(|(_, m)| **m);
+    let raw = pairs.clone().map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm()).collect();
+    let hip_aligned = pairs.map(|((a, b), _)| (Vector3::from(*a) + shift - Vector3::from(*b)).norm()).collect();
+    (raw, hip_aligned)
 }
 
 /// Evaluation settings.
@@ -149,7 +167,7 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
     let shape = ShapeModelView::parse(shape_bytes).map_err(|e| anyhow::anyhow!("shape model: {e}"))?;
     let body: BodyModelView<'_> = model.view();
     let k = intrinsics(ds);
-    let (torso, torso_stats) = torso_coeffs(model, 0.05);
+    let (torso, torso_stats) = torso_coeffs(model, 0.03);
     let mask: Vec<bool> = model.part_of_vertex.iter().map(|&p| upper_body(p)).collect();
     let mut bodies = match cfg.split.as_str() {
         "validation" => super::data::train_validation(ds).1,
@@ -166,6 +184,7 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
     let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
     let mut canonical = vec![0.0f32; shape.pixels()];
     let mut subset = vec![[0.0f32; 3]; body.counts().subset];
+    let mut normals = subset.clone();
     let mut images = 0;
     let mut failures = 0;
     let bar = ProgressBar::new(bodies.len() as u64)
@@ -200,7 +219,7 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
             p.length_unit_m = cfg.length_unit_m;
             let combined = initial_pose(&body, &est.shape, &pts, &up)
                 .ok()
-                .and_then(|pose0| fit_shape(&body, &frame, &k, &est.shape, pose0, &p, &mut subset).ok());
+                .and_then(|pose0| fit_shape(&body, &frame, &k, &est.shape, pose0, &p, &mut subset, &mut normals).ok());
             let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
             // Plain fitting: several starts from the mean, the best residual wins.
             let t2 = Instant::now();
@@ -209,13 +228,14 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
             let mut best: Option<supine_core::fit::FitResult> = None;
             for z0 in plain_starts(cfg.plain_starts) {
                 let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else { continue };
-                if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset) {
+                if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset, &mut normals) {
                     if best.is_none_or(|b| r.association.rms_m() < b.association.rms_m()) {
                         best = Some(r);
                     }
                 }
             }
             let ms_plain = t2.elapsed().as_secs_f64() * 1e3;
+            let assoc = [None, best.map(|r| r.association), combined.map(|r| r.association), None];
             let results: [Option<[f32; 20]>; 4] = [Some(est.shape), best.map(|r| r.shape), combined.map(|r| r.shape), Some([0.0; 20])];
             let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0];
             for m in 0..4 {
@@ -232,10 +252,16 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
                     s.ms += ms[m];
                     s.ms_n += 1;
                     s.tried += 1;
+                    if let Some(a) = assoc[m] {
+                        s.fit_n += 1;
+                        s.rms_sum += a.rms_m() as f64;
+                        s.pairs_sum += a.pairs as f64;
+                        s.occl_sum += a.occluded as f64;
+                    }
                     match results[m] {
                         Some(z) if m != 1 || z.iter().all(|x| x.abs() <= 3.0) => {
-                            let e = errs.get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed.vertices, &mask));
-                            s.add(&z, &truth_shape, e);
+                            let e = errs.get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed, &mask));
+                            s.add(&z, &truth_shape, &e.0, &e.1);
                         }
                         _ => s.rejected += 1,
                     }
@@ -250,8 +276,8 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
                     v.sort_by(f32::total_cmp);
                     *zc = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
                 }
-                let e = vertex_errors(model, &pose, &z, &truth_posed.vertices, &mask);
-                multi[i].add(&z, &truth_shape, &e);
+                let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
+                multi[i].add(&z, &truth_shape, &e.0, &e.1);
             }
         }
         bar.inc(1);

@@ -40,6 +40,8 @@ pub struct TrainConfig {
     pub trees: usize,
     /// EM rounds of the subspace.
     pub em_rounds: usize,
+    /// Keep the validation bodies out of the final model too (to score choices such as the pitch on them).
+    pub holdout_validation: bool,
 }
 
 /// Canonical images of a set of bodies.
@@ -168,14 +170,19 @@ pub fn project_all(view: &ShapeModelView<'_>, images: &[Vec<f32>]) -> Vec<Option
     images.par_iter().map(|im| view.subspace().project(im).ok().map(|(c, _)| c)).collect()
 }
 
-/// Mean normalised RMSE over the 20 coefficients of `forest` on (x, y).
+/// Coefficients the validation choice scores: the first five (paper Fig. 5); the higher ones are mostly noise.
+pub const SCORED: usize = 5;
+
+/// Mean over the first [`SCORED`] coefficients of the normalised RMSE of `forest` on (x, y).
 pub fn mean_nrmse(forest: &Forest, x: &[[f32; DIM]], y: &[[f32; DIM]]) -> f32 {
-    let mut se = 0.0f64;
+    let mut se = [0.0f64; SCORED];
     for (c, s) in x.iter().zip(y) {
         let p = forest.predict(c);
-        se += p.iter().zip(s).map(|(a, b)| ((a - b) as f64).powi(2)).sum::<f64>();
+        for k in 0..SCORED {
+            se[k] += ((p[k] - s[k]) as f64).powi(2);
+        }
     }
-    ((se / (x.len() * DIM).max(1) as f64).sqrt()) as f32
+    (se.iter().map(|e| (e / x.len().max(1) as f64).sqrt()).sum::<f64>() / SCORED as f64) as f32
 }
 
 /// Everything `train shape` produces.
@@ -190,14 +197,20 @@ pub struct Trained {
 pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> Result<Trained> {
     let cam = CanonicalCamera::with_pitch(cfg.pitch_m, cfg.stride);
     let (fit_b, val_b) = train_validation(ds);
-    let all: Vec<u32> = ds.train.clone();
+    let all: Vec<u32> = if cfg.holdout_validation { fit_b.iter().chain(&val_b).copied().collect() } else { ds.train.clone() };
     let bar = ProgressBar::new(all.len() as u64).with_style(
         ProgressStyle::with_template("canonical views {bar:40} {pos}/{len} bodies {elapsed}").expect("valid template"),
     );
     let t0 = std::time::Instant::now();
     let c = canonicals(ds, &all, &cam, cfg, &bar)?;
     bar.finish_and_clear();
-    let (mean, eigen, prior) = learn_subspace(&c.clean, &cam, cfg)?;
+    let pca_images: Vec<Vec<f32>> = if cfg.holdout_validation {
+        c.clean.iter().zip(&c.bodies).filter(|(_, b)| !val_b.contains(b)).map(|(im, _)| im.clone()).collect()
+    } else {
+        c.clean.clone()
+    };
+    let (mean, eigen, prior) = learn_subspace(&pca_images, &cam, cfg)?;
+    drop(pca_images);
     if let Some(dir) = png {
         std::fs::create_dir_all(dir)?;
         let (w, h) = (cam.width as usize, cam.height as usize);
@@ -237,7 +250,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         }
     }
     let fc = ForestConfig { trees: cfg.trees, min_leaf: best.1, seed: cfg.seed, ..Default::default() };
-    let forest = Forest::train(&xa, &ya, &fc);
+    let forest = if cfg.holdout_validation { Forest::train(&xf, &yf, &fc) } else { Forest::train(&xa, &ya, &fc) };
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
