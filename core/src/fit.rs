@@ -144,7 +144,11 @@ pub fn subset_normals(body: &BodyModelView<'_>, points: &[[f32; 3]], normals: &m
     normals.fill([0.0; 3]);
     let tris = body.torso_subset_triangles();
     for t in 0..tris.len() / 3 {
-        let ids = [tris.at(3 * t) as usize, tris.at(3 * t + 1) as usize, tris.at(3 * t + 2) as usize];
+        let ids = [
+            tris.at(3 * t) as usize,
+            tris.at(3 * t + 1) as usize,
+            tris.at(3 * t + 2) as usize,
+        ];
         if ids.iter().any(|&i| i >= points.len()) {
             continue;
         }
@@ -204,24 +208,33 @@ pub fn fit_shape(
         let mut a = [[0.0f32; SHAPE_COMPONENTS]; SHAPE_COMPONENTS];
         let mut b = [0.0f32; SHAPE_COMPONENTS];
         let mut basis = [[0.0f32; 3]; SHAPE_COMPONENTS];
-        last = icp::associate(frame, k, points, Some(normals), stride, &pose, &params.icp, |i, _, o, n| {
-            let v = subset.at(i) as usize;
-            let c = model_from_camera * o;
-            let n = model_from_camera.rotation * n;
-            let m = Vector3::from(body.shape_row(v, &[]));
-            body.row_basis(v, &mut basis);
-            let r = n.dot(&(c.coords - m)) / u;
-            let mut j = [0.0f32; SHAPE_COMPONENTS];
-            for (q, jq) in j.iter_mut().enumerate() {
-                *jq = n.dot(&Vector3::from(basis[q])) * body.sigma(q) / u;
-            }
-            for x in 0..SHAPE_COMPONENTS {
-                b[x] += j[x] * r;
-                for y in 0..=x {
-                    a[x][y] += j[x] * j[y];
+        last = icp::associate(
+            frame,
+            k,
+            points,
+            Some(normals),
+            stride,
+            &pose,
+            &params.icp,
+            |i, _, o, n| {
+                let v = subset.at(i) as usize;
+                let c = model_from_camera * o;
+                let n = model_from_camera.rotation * n;
+                let m = Vector3::from(body.shape_row(v, &[]));
+                body.row_basis(v, &mut basis);
+                let r = n.dot(&(c.coords - m)) / u;
+                let mut j = [0.0f32; SHAPE_COMPONENTS];
+                for (q, jq) in j.iter_mut().enumerate() {
+                    *jq = n.dot(&Vector3::from(basis[q])) * body.sigma(q) / u;
                 }
-            }
-        });
+                for x in 0..SHAPE_COMPONENTS {
+                    b[x] += j[x] * r;
+                    for y in 0..=x {
+                        a[x][y] += j[x] * j[y];
+                    }
+                }
+            },
+        );
         if last.pairs < SHAPE_COMPONENTS {
             return Err(FitError::Icp(IcpError::TooFewPairs { pairs: last.pairs }));
         }

@@ -114,7 +114,9 @@ pub fn partner(
     if o.z < p_cam.z - params.occluder_margin_m {
         return Err(());
     }
-    if params.mattress.signed_distance(&o) < params.above_mattress_m || (o - p_cam).norm() > params.max_distance_m {
+    if params.mattress.signed_distance(&o) < params.above_mattress_m
+        || (o - p_cam).norm() > params.max_distance_m
+    {
         return Ok(None);
     }
     let s = params.normal_step_px.max(1) as i32;
@@ -190,17 +192,26 @@ pub fn point_to_plane_step(
     let mut a = [[0.0f32; 6]; 6];
     let mut b = [0.0f32; 6];
     // Linearise about the centroid-free camera frame: p' = p + ω × p + t, r' = r + (p × n)·ω + n·t.
-    let assoc = associate(frame, k, points, normals, stride, camera_from_model, params, |_, p, o, n| {
-        let r = n.dot(&(p - o));
-        let c = p.coords.cross(n);
-        let j = [c.x, c.y, c.z, n.x, n.y, n.z];
-        for x in 0..6 {
-            b[x] -= j[x] * r;
-            for y in 0..=x {
-                a[x][y] += j[x] * j[y];
+    let assoc = associate(
+        frame,
+        k,
+        points,
+        normals,
+        stride,
+        camera_from_model,
+        params,
+        |_, p, o, n| {
+            let r = n.dot(&(p - o));
+            let c = p.coords.cross(n);
+            let j = [c.x, c.y, c.z, n.x, n.y, n.z];
+            for x in 0..6 {
+                b[x] -= j[x] * r;
+                for y in 0..=x {
+                    a[x][y] += j[x] * j[y];
+                }
             }
-        }
-    });
+        },
+    );
     if assoc.pairs < 6 {
         return Err(IcpError::TooFewPairs { pairs: assoc.pairs });
     }

@@ -39,9 +39,9 @@ pub mod camera;
 pub mod crc;
 pub mod depth;
 pub mod error;
+pub mod fit;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixture;
-pub mod fit;
 pub mod geometry;
 pub mod icp;
 pub mod model_file;

@@ -132,7 +132,11 @@ pub fn body_frame(
 }
 
 /// `a_from_frame` with origin `origin`, `y` along `up_body` and `z` along `front` made orthogonal to `y`.
-pub fn frame_from_axes(origin: Vector3, up_body: Vector3, front: Vector3) -> Result<Isometry3, DegenerateFrame> {
+pub fn frame_from_axes(
+    origin: Vector3,
+    up_body: Vector3,
+    front: Vector3,
+) -> Result<Isometry3, DegenerateFrame> {
     let yn = up_body.norm();
     if !(yn > 1e-3) || !origin.iter().all(|x| x.is_finite()) {
         return Err(DegenerateFrame);

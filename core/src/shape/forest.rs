@@ -49,11 +49,7 @@ pub(crate) fn validate(f: &ShapeForest<'_>) -> Result<(), &'static str> {
             if c >= n_leaves {
                 return Err("leaf index out of range");
             }
-        } else if feat as usize >= SUBSPACE_DIM
-            || !f.threshold.at(i).is_finite()
-            || c <= i
-            || c + 1 >= n
-        {
+        } else if feat as usize >= SUBSPACE_DIM || !f.threshold.at(i).is_finite() || c <= i || c + 1 >= n {
             return Err("internal node with a bad feature, threshold or child");
         }
     }

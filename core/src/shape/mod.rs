@@ -60,13 +60,27 @@ impl<'a> ShapeModelView<'a> {
         let file = ModelFile::parse(bytes, KIND, FORMAT_VERSION)?;
         let head = file.typed::<u32>(*b"HEAD", Some(4))?;
         let (w, h, stride, n_trees) = (head.at(0), head.at(1), head.at(2), head.at(3));
-        if w == 0 || h == 0 || w > 1024 || h > 1024 || stride == 0 || stride > 16 || n_trees == 0 || n_trees > 256 {
-            return Err(invalid(b"HEAD", "canonical size, stride or tree count out of range"));
+        if w == 0
+            || h == 0
+            || w > 1024
+            || h > 1024
+            || stride == 0
+            || stride > 16
+            || n_trees == 0
+            || n_trees > 256
+        {
+            return Err(invalid(
+                b"HEAD",
+                "canonical size, stride or tree count out of range",
+            ));
         }
         let pixels = (w * h) as usize;
         let cam = file.typed::<f32>(*b"CAMR", Some(9))?;
         if !cam.iter().all(f32::is_finite) || cam.at(0) <= 0.0 || cam.at(3) <= 0.0 {
-            return Err(invalid(b"CAMR", "canonical camera must be finite with positive focal and distance"));
+            return Err(invalid(
+                b"CAMR",
+                "canonical camera must be finite with positive focal and distance",
+            ));
         }
         let camera = CanonicalCamera {
             width: w as u16,

@@ -73,11 +73,18 @@ fn canonical_view_of_a_plane_and_a_box_is_exact() {
             if x == NO_VALUE {
                 continue;
             }
-            assert!((x - 0.05).abs() < 1e-4 || (x - 0.15).abs() < 1e-4, "pixel ({cu}, {cv}) = {x}");
+            assert!(
+                (x - 0.05).abs() < 1e-4 || (x - 0.15).abs() < 1e-4,
+                "pixel ({cu}, {cv}) = {x}"
+            );
             // Where the pixel centre of either surface lands in the depth image decides what it must show.
             let seen = |h: f32| {
                 let z = cam.distance_m - h;
-                let pb = Point3::new((cv as f32 - cam.cy) * z / cam.focal_px, (cu as f32 - cam.cx) * z / cam.focal_px, h);
+                let pb = Point3::new(
+                    (cv as f32 - cam.cy) * z / cam.focal_px,
+                    (cu as f32 - cam.cx) * z / cam.focal_px,
+                    h,
+                );
                 k.project(&(t * pb)).unwrap()
             };
             let b = seen(0.15);
@@ -157,10 +164,16 @@ fn damaged_shape_files_are_errors_not_panics() {
     for at in 0..n {
         let mut bad = buf;
         bad[at] ^= 0x5A;
-        assert!(ShapeModelView::parse(&bad[..n]).is_err(), "flip at byte {at} accepted");
+        assert!(
+            ShapeModelView::parse(&bad[..n]).is_err(),
+            "flip at byte {at} accepted"
+        );
     }
     for len in (0..n).step_by(7) {
-        assert!(ShapeModelView::parse(&buf[..len]).is_err(), "truncated to {len} accepted");
+        assert!(
+            ShapeModelView::parse(&buf[..len]).is_err(),
+            "truncated to {len} accepted"
+        );
     }
     let mut body = [0u8; fixture::TINY_BODY_LEN];
     let b = fixture::tiny_body_model(&mut body).unwrap();

@@ -51,7 +51,11 @@ pub fn image_strip(path: &Path, images: &[Vec<f32>], width: usize, height: usize
         for y in 0..th {
             for x in 0..tw {
                 let v = im[(y / zoom) * width + x / zoom];
-                let g = if v.is_finite() { (40.0 + 215.0 * (v - lo) / (hi - lo).max(1e-9)) as u8 } else { 0 };
+                let g = if v.is_finite() {
+                    (40.0 + 215.0 * (v - lo) / (hi - lo).max(1e-9)) as u8
+                } else {
+                    0
+                };
                 let o = (y * w + n * (tw + 4) + x) * 3;
                 rgb[o..o + 3].copy_from_slice(&[g, g, g]);
             }

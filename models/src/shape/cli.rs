@@ -91,7 +91,10 @@ pub fn run_train(a: &TrainShapeArgs) -> Result<()> {
     if let Some(t) = a.threads {
         rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
     }
-    anyhow::ensure!(a.pitch_mm >= 2.0 && a.pitch_mm <= 100.0, "--pitch-mm must lie in 2..100");
+    anyhow::ensure!(
+        a.pitch_mm >= 2.0 && a.pitch_mm <= 100.0,
+        "--pitch-mm must lie in 2..100"
+    );
     anyhow::ensure!(a.trees >= 1 && a.trees <= 256, "--trees must lie in 1..256");
     let ds = Dataset::open(&a.data).with_context(|| format!("opening dataset {}", a.data.display()))?;
     let cfg = TrainConfig {
@@ -112,14 +115,18 @@ pub fn run_train(a: &TrainShapeArgs) -> Result<()> {
     report["model_bytes"] = t.bytes.len().into();
     eprintln!("{}", serde_json::to_string_pretty(&report)?);
     if let Some(j) = &a.json {
-        std::fs::write(j, serde_json::to_string_pretty(&report)?).with_context(|| format!("writing {}", j.display()))?;
+        std::fs::write(j, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", j.display()))?;
     }
     Ok(())
 }
 
 /// Run `eval shape`.
 pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
-    anyhow::ensure!(a.split == "test" || a.split == "validation", "--split must be test or validation");
+    anyhow::ensure!(
+        a.split == "test" || a.split == "validation",
+        "--split must be test or validation"
+    );
     let ds = Dataset::open(&a.data).with_context(|| format!("opening dataset {}", a.data.display()))?;
     let model = match &a.body_model {
         Some(p) => BodyModel::load(p)?,
@@ -138,23 +145,40 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);
     if let Some(j) = &a.json {
-        std::fs::write(j, serde_json::to_string_pretty(&r)?).with_context(|| format!("writing {}", j.display()))?;
+        std::fs::write(j, serde_json::to_string_pretty(&r)?)
+            .with_context(|| format!("writing {}", j.display()))?;
     }
     if let Some(dir) = &a.png {
         std::fs::create_dir_all(dir)?;
-        let torso: Vec<usize> = r["torso_coeffs"].as_array().map(|v| v.iter().filter_map(|x| x.as_u64()).map(|x| x as usize).collect()).unwrap_or_default();
+        let torso: Vec<usize> = r["torso_coeffs"]
+            .as_array()
+            .map(|v| v.iter().filter_map(|x| x.as_u64()).map(|x| x as usize).collect())
+            .unwrap_or_default();
         let mut coeffs: Vec<usize> = (0..5).collect();
         coeffs.extend(torso.iter().filter(|t| **t >= 5));
-        for (key, file) in [("coeff_nrmse", "shape_fig5_nrmse.png"), ("coeff_sd", "shape_fig5_sd.png")] {
+        for (key, file) in [
+            ("coeff_nrmse", "shape_fig5_nrmse.png"),
+            ("coeff_sd", "shape_fig5_sd.png"),
+        ] {
             let groups: Vec<Vec<f64>> = coeffs
                 .iter()
-                .map(|&c| ["subspace", "fitting", "combined"].iter().map(|m| r[*m][key][c].as_f64().unwrap_or(0.0)).collect())
+                .map(|&c| {
+                    ["subspace", "fitting", "combined"]
+                        .iter()
+                        .map(|m| r[*m][key][c].as_f64().unwrap_or(0.0))
+                        .collect()
+                })
                 .collect();
             super::chart::bar_chart(&dir.join(file), &groups, 1.2, 0.1)?;
         }
         let v: Vec<Vec<f64>> = ["vertex_error_mm_mean", "vertex_error_mm_sd"]
             .iter()
-            .map(|k| ["subspace", "fitting", "combined"].iter().map(|m| r[*m][*k].as_f64().unwrap_or(0.0)).collect())
+            .map(|k| {
+                ["subspace", "fitting", "combined"]
+                    .iter()
+                    .map(|m| r[*m][*k].as_f64().unwrap_or(0.0))
+                    .collect()
+            })
             .collect();
         super::chart::bar_chart(&dir.join("shape_vertex_error.png"), &v, 40.0, 5.0)?;
     }
@@ -162,11 +186,19 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
 }
 
 fn print_table(r: &serde_json::Value) {
-    println!("torso_coeffs {}   images {}   seed {}   commit {}", r["torso_coeffs"], r["images"], r["seed"], r["commit"]);
-    println!("{:<14} {:>4} {:>44} {:>10} {:>7} {:>10} {:>9} {:>9}", "method", "n", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "hip-al. mm", "ms/frame", "rejected");
+    println!(
+        "torso_coeffs {}   images {}   seed {}   commit {}",
+        r["torso_coeffs"], r["images"], r["seed"], r["commit"]
+    );
+    println!(
+        "{:<14} {:>4} {:>44} {:>10} {:>7} {:>10} {:>9} {:>9}",
+        "method", "n", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "hip-al. mm", "ms/frame", "rejected"
+    );
     for m in ["subspace", "fitting", "combined", "mean_shape"] {
         for (label, j) in [(m.to_string(), &r[m]), (format!("{m}+arm"), &r[m]["with_arm"])] {
-            let c: Vec<String> = (0..5).map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN))).collect();
+            let c: Vec<String> = (0..5)
+                .map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN)))
+                .collect();
             println!(
                 "{:<14} {:>4} {:>44} {:>10.1} {:>7.1} {:>10.1} {:>9.1} {:>9.3}",
                 label,
@@ -182,7 +214,12 @@ fn print_table(r: &serde_json::Value) {
     }
     if let Some(m) = r["multi_frame"].as_array() {
         for j in m {
-            println!("multi-frame N={:<3} vertex {:.1} mm  s1 NRMSE {:.3}", j["views"], j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN), j["coeff_nrmse"][1].as_f64().unwrap_or(f64::NAN));
+            println!(
+                "multi-frame N={:<3} vertex {:.1} mm  s1 NRMSE {:.3}",
+                j["views"],
+                j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["coeff_nrmse"][1].as_f64().unwrap_or(f64::NAN)
+            );
         }
     }
 }

@@ -108,3 +108,22 @@ pub fn train_validation(ds: &Dataset) -> (Vec<u32>, Vec<u32>) {
     }
     (fit, val)
 }
+
+/// Generate a small dataset of the statistical body model into `dir` (tests, benches): `bodies` × `views`, 70/30
+/// split, half the views with the arm.
+pub fn small_dataset(dir: &std::path::Path, bodies: u32, views: u16, seed: u64) -> Result<Dataset> {
+    use crate::dataset::{DatasetConfig, generate};
+    use crate::render::noise::KinectNoise;
+    let cfg = DatasetConfig {
+        bodies,
+        views,
+        seed,
+        occluder_fraction: 0.5,
+        train_fraction: 0.7,
+        previews: 0,
+        noise: KinectNoise::default(),
+    };
+    let source = crate::scene::model_body::ModelBodySource::load(None)?;
+    generate(&source, &cfg, dir, &|| {})?;
+    Dataset::open(dir)
+}

@@ -41,8 +41,12 @@ pub fn torso_coeffs(model: &BodyModel, min_share: f64) -> (Vec<usize>, Vec<(f64,
     let all = energy(&mut (0..model.n_vertices));
     let total: f64 = torso.iter().sum();
     let frac = model.torso_subset.len() as f64 / model.n_vertices as f64;
-    let stats: Vec<(f64, f64)> = (0..k).map(|j| (torso[j] / total, (torso[j] / all[j].max(1e-30)) / frac)).collect();
-    let picked = (0..k).filter(|&j| stats[j].0 >= min_share && stats[j].1 >= 1.0).collect();
+    let stats: Vec<(f64, f64)> = (0..k)
+        .map(|j| (torso[j] / total, (torso[j] / all[j].max(1e-30)) / frac))
+        .collect();
+    let picked = (0..k)
+        .filter(|&j| stats[j].0 >= min_share && stats[j].1 >= 1.0)
+        .collect();
     (picked, stats)
 }
 
@@ -50,7 +54,15 @@ pub fn torso_coeffs(model: &BodyModel, min_share: f64) -> (Vec<usize>, Vec<(f64,
 pub fn upper_body(part: u8) -> bool {
     matches!(
         BodyPart::from_u8(part),
-        Some(BodyPart::Head | BodyPart::Neck | BodyPart::Chest | BodyPart::Abdomen | BodyPart::Pelvis | BodyPart::LeftUpperArm | BodyPart::RightUpperArm)
+        Some(
+            BodyPart::Head
+                | BodyPart::Neck
+                | BodyPart::Chest
+                | BodyPart::Abdomen
+                | BodyPart::Pelvis
+                | BodyPart::LeftUpperArm
+                | BodyPart::RightUpperArm
+        )
     )
 }
 
@@ -97,7 +109,9 @@ impl Stats {
     fn json(&self) -> serde_json::Value {
         let n = self.n.max(1) as f64;
         let nrmse: Vec<f64> = self.se.iter().map(|s| (s / n).sqrt()).collect();
-        let sd: Vec<f64> = (0..20).map(|k| (self.se[k] / n - (self.sum[k] / n).powi(2)).max(0.0).sqrt()).collect();
+        let sd: Vec<f64> = (0..20)
+            .map(|k| (self.se[k] / n - (self.sum[k] / n).powi(2)).max(0.0).sqrt())
+            .collect();
         let vm = self.v_sum / self.v_n.max(1.0);
         let vsd = (self.v_sq / self.v_n.max(1.0) - vm * vm).max(0.0).sqrt();
         let hm = self.h_sum / self.v_n.max(1.0);
@@ -121,15 +135,33 @@ impl Stats {
 
 /// Upper-body vertex errors (metres) of `est` against the true posed upper body: as posed in the body frame (no
 /// alignment), and with the estimated body moved so its hip centre meets the true one (how the tracker places it).
-fn vertex_errors(model: &BodyModel, pose: &Pose, est: &[f32; 20], truth: &PosedBody<'_>, mask: &[bool]) -> (Vec<f32>, Vec<f32>) {
+fn vertex_errors(
+    model: &BodyModel,
+    pose: &Pose,
+    est: &[f32; 20],
+    truth: &PosedBody<'_>,
+    mask: &[bool],
+) -> (Vec<f32>, Vec<f32>) {
     let posed = model.pose(&Shape::from_normalised(model, est), pose);
     let hip = |b: &PosedBody<'_>| {
-        (Vector3::from(b.salient_points[SalientPoint::LeftHip.index()]) + Vector3::from(b.salient_points[SalientPoint::RightHip.index()])) * 0.5
+        (Vector3::from(b.salient_points[SalientPoint::LeftHip.index()])
+            + Vector3::from(b.salient_points[SalientPoint::RightHip.index()]))
+            * 0.5
     };
     let shift = hip(truth) - hip(&posed);
-    let pairs = posed.vertices.iter().zip(&truth.vertices).zip(mask).filter(|(_, m)| **m);
-    let raw = pairs.clone().map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm()).collect();
-    let hip_aligned = pairs.map(|((a, b), _)| (Vector3::from(*a) + shift - Vector3::from(*b)).norm()).collect();
+    let pairs = posed
+        .vertices
+        .iter()
+        .zip(&truth.vertices)
+        .zip(mask)
+        .filter(|(_, m)| **m);
+    let raw = pairs
+        .clone()
+        .map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm())
+        .collect();
+    let hip_aligned = pairs
+        .map(|((a, b), _)| (Vector3::from(*a) + shift - Vector3::from(*b)).norm())
+        .collect();
     (raw, hip_aligned)
 }
 
@@ -163,7 +195,12 @@ fn plain_starts(n: usize) -> Vec<[f32; 20]> {
 }
 
 /// Run the evaluation; returns the JSON report.
-pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalConfig) -> Result<serde_json::Value> {
+pub fn evaluate(
+    ds: &Dataset,
+    model: &BodyModel,
+    shape_bytes: &[u8],
+    cfg: &EvalConfig,
+) -> Result<serde_json::Value> {
     let shape = ShapeModelView::parse(shape_bytes).map_err(|e| anyhow::anyhow!("shape model: {e}"))?;
     let body: BodyModelView<'_> = model.view();
     let k = intrinsics(ds);
@@ -187,8 +224,10 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
     let mut normals = subset.clone();
     let mut images = 0;
     let mut failures = 0;
-    let bar = ProgressBar::new(bodies.len() as u64)
-        .with_style(ProgressStyle::with_template("eval shape {bar:40} {pos}/{len} bodies {elapsed}").expect("valid template"));
+    let bar = ProgressBar::new(bodies.len() as u64).with_style(
+        ProgressStyle::with_template("eval shape {bar:40} {pos}/{len} bodies {elapsed}")
+            .expect("valid template"),
+    );
     for &b in &bodies {
         let rec = ds.read_body(b)?;
         let pose = body_pose(&rec)?;
@@ -217,9 +256,19 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
             let t1 = Instant::now();
             let mut p = FitParams::combined(icp, &torso);
             p.length_unit_m = cfg.length_unit_m;
-            let combined = initial_pose(&body, &est.shape, &pts, &up)
+            let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
+                fit_shape(
+                    &body,
+                    &frame,
+                    &k,
+                    &est.shape,
+                    pose0,
+                    &p,
+                    &mut subset,
+                    &mut normals,
+                )
                 .ok()
-                .and_then(|pose0| fit_shape(&body, &frame, &k, &est.shape, pose0, &p, &mut subset, &mut normals).ok());
+            });
             let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
             // Plain fitting: several starts from the mean, the best residual wins.
             let t2 = Instant::now();
@@ -227,7 +276,9 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
             pp.length_unit_m = cfg.length_unit_m;
             let mut best: Option<supine_core::fit::FitResult> = None;
             for z0 in plain_starts(cfg.plain_starts) {
-                let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else { continue };
+                let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else {
+                    continue;
+                };
                 if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset, &mut normals) {
                     if best.is_none_or(|b| r.association.rms_m() < b.association.rms_m()) {
                         best = Some(r);
@@ -235,8 +286,18 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
                 }
             }
             let ms_plain = t2.elapsed().as_secs_f64() * 1e3;
-            let assoc = [None, best.map(|r| r.association), combined.map(|r| r.association), None];
-            let results: [Option<[f32; 20]>; 4] = [Some(est.shape), best.map(|r| r.shape), combined.map(|r| r.shape), Some([0.0; 20])];
+            let assoc = [
+                None,
+                best.map(|r| r.association),
+                combined.map(|r| r.association),
+                None,
+            ];
+            let results: [Option<[f32; 20]>; 4] = [
+                Some(est.shape),
+                best.map(|r| r.shape),
+                combined.map(|r| r.shape),
+                Some([0.0; 20]),
+            ];
             let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0];
             for m in 0..4 {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
@@ -260,7 +321,8 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
                     }
                     match results[m] {
                         Some(z) if m != 1 || z.iter().all(|x| x.abs() <= 3.0) => {
-                            let e = errs.get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed, &mask));
+                            let e = errs
+                                .get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed, &mask));
                             s.add(&z, &truth_shape, &e.0, &e.1);
                         }
                         _ => s.rejected += 1,
@@ -274,7 +336,11 @@ pub fn evaluate(ds: &Dataset, model: &BodyModel, shape_bytes: &[u8], cfg: &EvalC
                 for (c, zc) in z.iter_mut().enumerate() {
                     let mut v: Vec<f32> = per_view[..n].iter().map(|s| s[c]).collect();
                     v.sort_by(f32::total_cmp);
-                    *zc = if n % 2 == 1 { v[n / 2] } else { 0.5 * (v[n / 2 - 1] + v[n / 2]) };
+                    *zc = if n % 2 == 1 {
+                        v[n / 2]
+                    } else {
+                        0.5 * (v[n / 2 - 1] + v[n / 2])
+                    };
                 }
                 let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
                 multi[i].add(&z, &truth_shape, &e.0, &e.1);

@@ -39,9 +39,14 @@ pub fn write_shape_model(
     info: &str,
 ) -> Result<Vec<u8>> {
     let p = cam.pixels();
-    ensure!(mean.len() == p && eigen.nrows() == p && eigen.ncols() == SUBSPACE_DIM, "subspace size mismatch");
+    ensure!(
+        mean.len() == p && eigen.nrows() == p && eigen.ncols() == SUBSPACE_DIM,
+        "subspace size mismatch"
+    );
     let escl = scales(
-        (0..p).flat_map(|i| (0..SUBSPACE_DIM).map(move |k| (i, k))).map(|(i, k)| (k, eigen[(i, k)])),
+        (0..p)
+            .flat_map(|i| (0..SUBSPACE_DIM).map(move |k| (i, k)))
+            .map(|(i, k)| (k, eigen[(i, k)])),
         SUBSPACE_DIM,
     );
     let mut eigs = Vec::with_capacity(p * SUBSPACE_DIM);
@@ -51,7 +56,8 @@ pub fn write_shape_model(
         }
     }
     let mut roots = Vec::new();
-    let (mut feat, mut thr, mut child, mut leaves) = (Vec::new(), Vec::new(), Vec::new(), Vec::<[f32; DIM]>::new());
+    let (mut feat, mut thr, mut child, mut leaves) =
+        (Vec::new(), Vec::new(), Vec::new(), Vec::<[f32; DIM]>::new());
     for t in &forest.trees {
         let base = feat.len() as u32;
         roots.push(base);
@@ -76,8 +82,16 @@ pub fn write_shape_model(
         }
     }
     let lscl = scales(leaves.iter().flat_map(|l| l.iter().copied().enumerate()), DIM);
-    let leaf_q: Vec<i16> = leaves.iter().flat_map(|l| (0..DIM).map(|k| q(l[k], lscl[k])).collect::<Vec<_>>()).collect();
-    let head = [cam.width as u32, cam.height as u32, cam.stride as u32, forest.trees.len() as u32];
+    let leaf_q: Vec<i16> = leaves
+        .iter()
+        .flat_map(|l| (0..DIM).map(|k| q(l[k], lscl[k])).collect::<Vec<_>>())
+        .collect();
+    let head = [
+        cam.width as u32,
+        cam.height as u32,
+        cam.stride as u32,
+        forest.trees.len() as u32,
+    ];
     let camr = [
         cam.focal_px,
         cam.cx,

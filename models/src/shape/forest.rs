@@ -176,7 +176,13 @@ impl Forest {
                         feature,
                         threshold,
                         left,
-                    } => i = if c[*feature as usize] < *threshold { *left } else { left + 1 },
+                    } => {
+                        i = if c[*feature as usize] < *threshold {
+                            *left
+                        } else {
+                            left + 1
+                        }
+                    }
                     Node::Leaf(v) => {
                         for k in 0..DIM {
                             acc[k] += v[k];
@@ -207,9 +213,24 @@ mod tests {
             .collect();
         let y: Vec<[f32; DIM]> = x
             .iter()
-            .map(|c| std::array::from_fn(|k| if k == 0 { if c[3] > 0.0 { 1.0 } else { -1.0 } } else { c[5] }))
+            .map(|c| {
+                std::array::from_fn(|k| {
+                    if k == 0 {
+                        if c[3] > 0.0 { 1.0 } else { -1.0 }
+                    } else {
+                        c[5]
+                    }
+                })
+            })
             .collect();
-        let f = Forest::train(&x, &y, &ForestConfig { mtry: 20, ..Default::default() });
+        let f = Forest::train(
+            &x,
+            &y,
+            &ForestConfig {
+                mtry: 20,
+                ..Default::default()
+            },
+        );
         let mut c = [0.0f32; DIM];
         c[3] = 0.5;
         c[5] = 0.6;
@@ -218,6 +239,16 @@ mod tests {
         assert!((p[1] - 0.6).abs() < 0.15, "ramp {}", p[1]);
         c[3] = -0.5;
         assert!((f.predict(&c)[0] + 1.0).abs() < 0.15);
-        assert_eq!(f, Forest::train(&x, &y, &ForestConfig { mtry: 20, ..Default::default() }));
+        assert_eq!(
+            f,
+            Forest::train(
+                &x,
+                &y,
+                &ForestConfig {
+                    mtry: 20,
+                    ..Default::default()
+                }
+            )
+        );
     }
 }

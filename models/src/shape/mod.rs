@@ -16,5 +16,7 @@ pub const DEFAULT_ARTIFACT: &str = "models/artifacts/shape.ssm";
 
 /// Absolute path of the committed default shape model.
 pub fn default_artifact_path() -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts").join("shape.ssm")
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("artifacts")
+        .join("shape.ssm")
 }

@@ -12,7 +12,13 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 /// The leading `k` right singular vectors (columns of a P × k matrix) and singular values of `x`.
-pub fn randomized_svd(x: &DMatrix<f32>, k: usize, oversample: usize, power_iters: usize, seed: u64) -> (DMatrix<f32>, Vec<f32>) {
+pub fn randomized_svd(
+    x: &DMatrix<f32>,
+    k: usize,
+    oversample: usize,
+    power_iters: usize,
+    seed: u64,
+) -> (DMatrix<f32>, Vec<f32>) {
     let l = (k + oversample).min(x.nrows()).min(x.ncols());
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let omega = DMatrix::<f32>::from_fn(x.ncols(), l, |_, _| StandardNormal.sample(&mut rng));
@@ -50,14 +56,20 @@ mod tests {
         let (n, p, r) = (120, 300, 5);
         let a = DMatrix::<f32>::from_fn(n, r, |_, _| StandardNormal.sample(&mut rng));
         let b = DMatrix::<f32>::from_fn(r, p, |_, _| StandardNormal.sample(&mut rng));
-        let scales = DMatrix::<f32>::from_diagonal(&nalgebra::DVector::from_vec(vec![50.0, 20.0, 10.0, 5.0, 2.0]));
+        let scales =
+            DMatrix::<f32>::from_diagonal(&nalgebra::DVector::from_vec(vec![50.0, 20.0, 10.0, 5.0, 2.0]));
         let x = &a * scales * &b;
         let (v, s) = randomized_svd(&x, 5, 10, 2, 1);
         let exact = x.clone().svd(false, true);
         let mut sv: Vec<f32> = exact.singular_values.iter().copied().collect();
         sv.sort_by(|a, b| b.total_cmp(a));
         for i in 0..5 {
-            assert!((s[i] - sv[i]).abs() / sv[i] < 1e-3, "singular value {i}: {} vs {}", s[i], sv[i]);
+            assert!(
+                (s[i] - sv[i]).abs() / sv[i] < 1e-3,
+                "singular value {i}: {} vs {}",
+                s[i],
+                sv[i]
+            );
         }
         // Orthonormal columns spanning X's row space: X V Vᵀ = X.
         let recon = &x * &v * v.transpose();

@@ -57,7 +57,13 @@ pub struct Canonicals {
 }
 
 /// The canonical view of one depth image (NO_VALUE everywhere if the frame cannot be built).
-pub fn canonical_of(depth: &[u16], k: &Intrinsics, pts: &[nalgebra::Point3<f32>; 6], mattress: &supine_core::geometry::Plane, cam: &CanonicalCamera) -> Vec<f32> {
+pub fn canonical_of(
+    depth: &[u16],
+    k: &Intrinsics,
+    pts: &[nalgebra::Point3<f32>; 6],
+    mattress: &supine_core::geometry::Plane,
+    cam: &CanonicalCamera,
+) -> Vec<f32> {
     let mut out = vec![NO_VALUE; cam.pixels()];
     if let (Ok(frame), Ok(t)) = (
         DepthFrame::new(depth, k.width, k.height, Timestamp::default(), 0),
@@ -69,7 +75,13 @@ pub fn canonical_of(depth: &[u16], k: &Intrinsics, pts: &[nalgebra::Point3<f32>;
 }
 
 /// Canonical images of `bodies`.
-pub fn canonicals(ds: &Dataset, bodies: &[u32], cam: &CanonicalCamera, cfg: &TrainConfig, bar: &ProgressBar) -> Result<Canonicals> {
+pub fn canonicals(
+    ds: &Dataset,
+    bodies: &[u32],
+    cam: &CanonicalCamera,
+    cfg: &TrainConfig,
+    bar: &ProgressBar,
+) -> Result<Canonicals> {
     let k = intrinsics(ds);
     let per: Vec<Result<Vec<(Vec<f32>, Vec<f32>, [f32; DIM], u32)>>> = bodies
         .par_iter()
@@ -112,7 +124,11 @@ pub fn empty_forest() -> Forest {
 }
 
 /// Mean image, eigen-images (P × 20) and coefficient variances from canonical images with unseen pixels.
-pub fn learn_subspace(images: &[Vec<f32>], cam: &CanonicalCamera, cfg: &TrainConfig) -> Result<(Vec<f32>, DMatrix<f32>, [f32; SUBSPACE_DIM])> {
+pub fn learn_subspace(
+    images: &[Vec<f32>],
+    cam: &CanonicalCamera,
+    cfg: &TrainConfig,
+) -> Result<(Vec<f32>, DMatrix<f32>, [f32; SUBSPACE_DIM])> {
     let p = cam.pixels();
     let n = images.len();
     if n < SUBSPACE_DIM + 1 {
@@ -129,14 +145,29 @@ pub fn learn_subspace(images: &[Vec<f32>], cam: &CanonicalCamera, cfg: &TrainCon
             }
         }
     }
-    let fill: Vec<f32> = (0..p).map(|i| if cnt[i] > 0 { (sum[i] / cnt[i] as f64) as f32 } else { 0.0 }).collect();
+    let fill: Vec<f32> = (0..p)
+        .map(|i| {
+            if cnt[i] > 0 {
+                (sum[i] / cnt[i] as f64) as f32
+            } else {
+                0.0
+            }
+        })
+        .collect();
     let mut filled: Vec<Vec<f32>> = images
         .iter()
-        .map(|im| im.iter().zip(&fill).map(|(&x, &f)| if x == NO_VALUE { f } else { x }).collect())
+        .map(|im| {
+            im.iter()
+                .zip(&fill)
+                .map(|(&x, &f)| if x == NO_VALUE { f } else { x })
+                .collect()
+        })
         .collect();
     let mut result = None;
     for round in 0..=cfg.em_rounds {
-        let mean: Vec<f32> = (0..p).map(|i| filled.iter().map(|im| im[i] as f64).sum::<f64>() as f32 / n as f32).collect();
+        let mean: Vec<f32> = (0..p)
+            .map(|i| filled.iter().map(|im| im[i] as f64).sum::<f64>() as f32 / n as f32)
+            .collect();
         let x = DMatrix::<f32>::from_fn(n, p, |r, c| filled[r][c] - mean[c]);
         let (v, s) = super::rsvd::randomized_svd(&x, SUBSPACE_DIM, 10, 2, cfg.seed ^ 0x5B5D);
         let mut var = [0.0f32; SUBSPACE_DIM];
@@ -154,7 +185,15 @@ pub fn learn_subspace(images: &[Vec<f32>], cam: &CanonicalCamera, cfg: &TrainCon
                 .par_iter()
                 .zip(filled.par_iter())
                 .map(|(im, old)| match sub.project(im) {
-                    Ok((c, _)) => (0..p).map(|i| if im[i] == NO_VALUE { sub.reconstruct_at(i, &c) } else { im[i] }).collect(),
+                    Ok((c, _)) => (0..p)
+                        .map(|i| {
+                            if im[i] == NO_VALUE {
+                                sub.reconstruct_at(i, &c)
+                            } else {
+                                im[i]
+                            }
+                        })
+                        .collect(),
                     Err(_) => old.clone(),
                 })
                 .collect();
@@ -167,7 +206,10 @@ pub fn learn_subspace(images: &[Vec<f32>], cam: &CanonicalCamera, cfg: &TrainCon
 
 /// Subspace coefficients of images through the core projection of a model file's subspace (failed ones dropped).
 pub fn project_all(view: &ShapeModelView<'_>, images: &[Vec<f32>]) -> Vec<Option<[f32; SUBSPACE_DIM]>> {
-    images.par_iter().map(|im| view.subspace().project(im).ok().map(|(c, _)| c)).collect()
+    images
+        .par_iter()
+        .map(|im| view.subspace().project(im).ok().map(|(c, _)| c))
+        .collect()
 }
 
 /// Coefficients the validation choice scores: the first five (paper Fig. 5); the higher ones are mostly noise.
@@ -197,15 +239,25 @@ pub struct Trained {
 pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> Result<Trained> {
     let cam = CanonicalCamera::with_pitch(cfg.pitch_m, cfg.stride);
     let (fit_b, val_b) = train_validation(ds);
-    let all: Vec<u32> = if cfg.holdout_validation { fit_b.iter().chain(&val_b).copied().collect() } else { ds.train.clone() };
+    let all: Vec<u32> = if cfg.holdout_validation {
+        fit_b.iter().chain(&val_b).copied().collect()
+    } else {
+        ds.train.clone()
+    };
     let bar = ProgressBar::new(all.len() as u64).with_style(
-        ProgressStyle::with_template("canonical views {bar:40} {pos}/{len} bodies {elapsed}").expect("valid template"),
+        ProgressStyle::with_template("canonical views {bar:40} {pos}/{len} bodies {elapsed}")
+            .expect("valid template"),
     );
     let t0 = std::time::Instant::now();
     let c = canonicals(ds, &all, &cam, cfg, &bar)?;
     bar.finish_and_clear();
     let pca_images: Vec<Vec<f32>> = if cfg.holdout_validation {
-        c.clean.iter().zip(&c.bodies).filter(|(_, b)| !val_b.contains(b)).map(|(im, _)| im.clone()).collect()
+        c.clean
+            .iter()
+            .zip(&c.bodies)
+            .filter(|(_, b)| !val_b.contains(b))
+            .map(|(im, _)| im.clone())
+            .collect()
     } else {
         c.clean.clone()
     };
@@ -217,7 +269,9 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         let mut strip = vec![mean.clone()];
         strip.extend((0..3).map(|k| eigen.column(k).iter().copied().collect::<Vec<f32>>()));
         super::chart::image_strip(&dir.join("shape_eigen_images.png"), &strip, w, h, 3)?;
-        let views: Vec<Vec<f32>> = (0..4).flat_map(|i| [c.clean[i * 12].clone(), c.noisy[i * 12].clone()]).collect();
+        let views: Vec<Vec<f32>> = (0..4)
+            .flat_map(|i| [c.clean[i * 12].clone(), c.noisy[i * 12].clone()])
+            .collect();
         super::chart::image_strip(&dir.join("shape_canonical_views.png"), &views, w, h, 3)?;
     }
     let sub_bytes = write_shape_model(&cam, &mean, &eigen, &prior, &empty_forest(), "{}")?;
@@ -241,7 +295,12 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     let mut choices = Vec::new();
     let mut best = (f32::INFINITY, 5usize);
     for min_leaf in [2usize, 5, 10, 20] {
-        let fc = ForestConfig { trees: cfg.trees, min_leaf, seed: cfg.seed, ..Default::default() };
+        let fc = ForestConfig {
+            trees: cfg.trees,
+            min_leaf,
+            seed: cfg.seed,
+            ..Default::default()
+        };
         let f = Forest::train(&xf, &yf, &fc);
         let e = mean_nrmse(&f, &xv, &yv);
         choices.push(serde_json::json!({"min_leaf": min_leaf, "validation_mean_nrmse": e}));
@@ -249,8 +308,17 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
             best = (e, min_leaf);
         }
     }
-    let fc = ForestConfig { trees: cfg.trees, min_leaf: best.1, seed: cfg.seed, ..Default::default() };
-    let forest = if cfg.holdout_validation { Forest::train(&xf, &yf, &fc) } else { Forest::train(&xa, &ya, &fc) };
+    let fc = ForestConfig {
+        trees: cfg.trees,
+        min_leaf: best.1,
+        seed: cfg.seed,
+        ..Default::default()
+    };
+    let forest = if cfg.holdout_validation {
+        Forest::train(&xf, &yf, &fc)
+    } else {
+        Forest::train(&xa, &ya, &fc)
+    };
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
@@ -262,9 +330,58 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "validation_bodies": val_b.len(),
         "validation_choices": choices,
         "nodes": forest.node_count(),
-        "seconds": t0.elapsed().as_secs_f32(),
     });
+    // The file's provenance leaves the wall time out, so equal seeds give byte-identical files.
     let bytes = write_shape_model(&cam, &mean, &eigen, &prior, &forest, &report.to_string())?;
-    ShapeModelView::parse(&bytes).map_err(|e| anyhow::anyhow!("written shape model does not validate: {e}"))?;
+    let mut report = report;
+    report["seconds"] = t0.elapsed().as_secs_f32().into();
+    ShapeModelView::parse(&bytes)
+        .map_err(|e| anyhow::anyhow!("written shape model does not validate: {e}"))?;
     Ok(Trained { bytes, report })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::body::BodyModel;
+    use crate::shape::eval::{EvalConfig, evaluate};
+
+    #[test]
+    fn a_tiny_model_trains_deterministically_and_evaluates() {
+        let dir = std::env::temp_dir().join(format!("supine-shape-train-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let ds = super::super::data::small_dataset(&dir, 10, 4, 5).unwrap();
+        let cfg = TrainConfig {
+            pitch_m: 0.05,
+            stride: 4,
+            seed: 3,
+            point_noise_m: 0.03,
+            pixel_noise_m: 0.01,
+            trees: 3,
+            em_rounds: 1,
+            holdout_validation: false,
+        };
+        let a = train(&ds, &cfg, None).unwrap();
+        let b = train(&ds, &cfg, None).unwrap();
+        assert_eq!(a.bytes, b.bytes, "training is not deterministic");
+        let view = ShapeModelView::parse(&a.bytes).unwrap();
+        assert_eq!(view.forest().tree_count(), 3);
+        let model = BodyModel::load_default().unwrap();
+        let ec = EvalConfig {
+            seed: 1,
+            point_noise_m: 0.03,
+            length_unit_m: 0.01,
+            plain_starts: 2,
+            max_bodies: 1,
+            split: "test".into(),
+        };
+        let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
+        for m in ["subspace", "fitting", "combined"] {
+            let v = r[m]["vertex_error_mm_mean"].as_f64().unwrap();
+            assert!(v.is_finite() && v > 0.0 && v < 300.0, "{m}: {v} mm");
+            assert_eq!(r[m]["coeff_nrmse"].as_array().unwrap().len(), 20);
+        }
+        assert_eq!(r["images"].as_u64(), Some(4));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
