@@ -241,8 +241,8 @@ pub fn fit_shape(
         let inv_n = 1.0 / last.pairs as f32;
         for x in 0..SHAPE_COMPONENTS {
             b[x] = b[x] * inv_n + params.prior_weight[x] * z0[x];
-            for y in 0..=x {
-                a[x][y] *= inv_n;
+            for ay in a[x].iter_mut().take(x + 1) {
+                *ay *= inv_n;
             }
             a[x][x] += params.lambda + params.prior_weight[x];
         }

@@ -131,7 +131,7 @@ pub fn partner(
     };
     let n = (r - l).cross(&(b - t));
     let nn = n.norm();
-    if !(nn > 0.0) {
+    if nn.is_nan() || nn <= 0.0 {
         return Ok(None);
     }
     let mut n = n / nn;
@@ -159,10 +159,10 @@ pub fn associate(
     let mut a = Association::default();
     for (i, q) in points.iter().enumerate().step_by(stride.max(1)) {
         let p = camera_from_model * Point3::from(*q);
-        if let Some(nm) = normals.and_then(|n| n.get(i)) {
-            if (camera_from_model.rotation * Vector3::from(*nm)).dot(&p.coords) >= 0.0 {
-                continue;
-            }
+        if let Some(nm) = normals.and_then(|n| n.get(i))
+            && (camera_from_model.rotation * Vector3::from(*nm)).dot(&p.coords) >= 0.0
+        {
+            continue;
         }
         match partner(frame, k, &p, params) {
             Ok(Some((o, n))) => {

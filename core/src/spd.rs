@@ -4,6 +4,8 @@
 //! 20x20 systems of the shape code, 100 for the 6x6 ICP system. Written out (rather than nalgebra's generic
 //! decomposition) so the per-frame path stays on fixed arrays with a clear failure value and no panics.
 
+// Triangular solves read best with explicit row and column indices.
+#[allow(clippy::needless_range_loop)]
 /// Solve `a x = b` for symmetric positive-definite `a` (only the lower triangle is read; `a` is overwritten by its
 /// Cholesky factor, `b` by `x`). Returns false, leaving `b` unspecified, when `a` is not positive definite.
 pub fn solve_spd<const N: usize>(a: &mut [[f32; N]; N], b: &mut [f32; N]) -> bool {
@@ -12,7 +14,7 @@ pub fn solve_spd<const N: usize>(a: &mut [[f32; N]; N], b: &mut [f32; N]) -> boo
         for k in 0..j {
             d -= a[j][k] * a[j][k];
         }
-        if !(d > 0.0) || !d.is_finite() {
+        if d.is_nan() || d <= 0.0 || !d.is_finite() {
             return false;
         }
         let d = libm::sqrtf(d);

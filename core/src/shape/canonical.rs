@@ -138,13 +138,13 @@ pub fn frame_from_axes(
     front: Vector3,
 ) -> Result<Isometry3, DegenerateFrame> {
     let yn = up_body.norm();
-    if !(yn > 1e-3) || !origin.iter().all(|x| x.is_finite()) {
+    if yn.is_nan() || yn <= 1e-3 || !origin.iter().all(|x| x.is_finite()) {
         return Err(DegenerateFrame);
     }
     let y = up_body / yn;
     let z = front - y * front.dot(&y);
     let zn = z.norm();
-    if !(zn > 1e-3) {
+    if zn.is_nan() || zn <= 1e-3 {
         return Err(DegenerateFrame);
     }
     let z = z / zn;

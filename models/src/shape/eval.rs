@@ -279,10 +279,10 @@ pub fn evaluate(
                 let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else {
                     continue;
                 };
-                if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset, &mut normals) {
-                    if best.is_none_or(|b| r.association.rms_m() < b.association.rms_m()) {
-                        best = Some(r);
-                    }
+                if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset, &mut normals)
+                    && best.is_none_or(|b| r.association.rms_m() < b.association.rms_m())
+                {
+                    best = Some(r);
                 }
             }
             let ms_plain = t2.elapsed().as_secs_f64() * 1e3;

@@ -74,6 +74,9 @@ pub fn canonical_of(
     out
 }
 
+/// One view's canonical images (exact points, noisy points), its true shape and its body.
+type CanonicalPair = (Vec<f32>, Vec<f32>, [f32; DIM], u32);
+
 /// Canonical images of `bodies`.
 pub fn canonicals(
     ds: &Dataset,
@@ -83,7 +86,7 @@ pub fn canonicals(
     bar: &ProgressBar,
 ) -> Result<Canonicals> {
     let k = intrinsics(ds);
-    let per: Vec<Result<Vec<(Vec<f32>, Vec<f32>, [f32; DIM], u32)>>> = bodies
+    let per: Vec<Result<Vec<CanonicalPair>>> = bodies
         .par_iter()
         .map(|&b| {
             let rec = ds.read_body(b)?;
