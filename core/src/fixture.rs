@@ -195,3 +195,120 @@ pub fn tiny_body_model(out: &mut [u8]) -> Result<usize, WriteError> {
     ];
     model_file::write(body_model::KIND, body_model::FORMAT_VERSION, &sections, out)
 }
+
+/// Canonical width of the tiny shape model.
+pub const SHAPE_W: usize = 8;
+/// Canonical height of the tiny shape model.
+pub const SHAPE_H: usize = 6;
+/// Bytes the tiny shape model file occupies (a buffer of this size always suffices).
+pub const TINY_SHAPE_LEN: usize = 4096;
+/// Leaf vectors of the tiny forest: tree 0 splits on `c[0] < 0` into leaves 0 and 1, tree 1 is leaf 2.
+pub const SHAPE_LEAVES: [[i16; 20]; 3] = {
+    let mut l = [[0i16; 20]; 3];
+    let mut k = 0;
+    while k < 20 {
+        l[0][k] = -(k as i16) * 10;
+        l[1][k] = k as i16 * 10;
+        l[2][k] = 100;
+        k += 1;
+    }
+    l
+};
+/// Dequantisation scale of the tiny forest's outputs.
+pub const SHAPE_LEAF_SCALE: f32 = 0.01;
+
+/// Quantised eigen-image element (pixel, component) of the tiny shape model: a fixed pseudo-random integer.
+pub const fn eigen_q(pixel: usize, k: usize) -> i16 {
+    let h = (pixel as u32).wrapping_mul(2_654_435_761) ^ (k as u32).wrapping_mul(40_503).wrapping_add(12_345);
+    let h = h ^ (h >> 13);
+    (h.wrapping_mul(1_274_126_177) >> 20) as i16 % 1000
+}
+
+/// Dequantisation scale of the tiny eigen-images.
+pub const EIGEN_SCALE: f32 = 1e-3;
+
+/// Mean canonical value of `pixel` of the tiny shape model.
+pub fn shape_mean(pixel: usize) -> f32 {
+    0.01 * (pixel % 7) as f32
+}
+
+/// Write the tiny shape model (8x6 canonical view, 20 eigen-images, two trees) into `out`; returns its length.
+pub fn tiny_shape_model(out: &mut [u8]) -> Result<usize, WriteError> {
+    use crate::shape::{FORMAT_VERSION, KIND};
+    const P: usize = SHAPE_W * SHAPE_H;
+    let head = [SHAPE_W as u32, SHAPE_H as u32, 1, 2];
+    let camr = [20.0f32, 3.5, 2.5, 2.0, 0.5, 0.5, 0.9, 0.45, 0.03];
+    let mut mean = [0u8; 4 * P];
+    let mut eigs = [0u8; 2 * P * 20];
+    for i in 0..P {
+        mean[4 * i..4 * i + 4].copy_from_slice(&shape_mean(i).to_le_bytes());
+        for k in 0..20 {
+            let at = 2 * (i * 20 + k);
+            eigs[at..at + 2].copy_from_slice(&eigen_q(i, k).to_le_bytes());
+        }
+    }
+    let mut escl = [0u8; 80];
+    let mut lscl = [0u8; 80];
+    for k in 0..20 {
+        escl[4 * k..4 * k + 4].copy_from_slice(&EIGEN_SCALE.to_le_bytes());
+        lscl[4 * k..4 * k + 4].copy_from_slice(&SHAPE_LEAF_SCALE.to_le_bytes());
+    }
+    let epri = [0u8; 80];
+    let tree = le_u32(&[0, 3]);
+    // Nodes: 0 split c[0] < 0 → 1, 2; 1 leaf 0; 2 leaf 1; 3 leaf 2.
+    let nfea = le_u16(&[0, 0xFFFF, 0xFFFF, 0xFFFF]);
+    let mut nthr = [0u8; 16];
+    nthr[..4].copy_from_slice(&0.0f32.to_le_bytes());
+    let nchl = le_u32(&[1, 0, 1, 2]);
+    let mut leaf = [0u8; 2 * 60];
+    for (l, row) in SHAPE_LEAVES.iter().enumerate() {
+        for (k, x) in row.iter().enumerate() {
+            leaf[2 * (l * 20 + k)..2 * (l * 20 + k) + 2].copy_from_slice(&x.to_le_bytes());
+        }
+    }
+    let h = le_u32(&head);
+    let mut c = [0u8; 36];
+    for (i, x) in camr.iter().enumerate() {
+        c[4 * i..4 * i + 4].copy_from_slice(&x.to_le_bytes());
+    }
+    let s = |tag: &[u8; 4], elem, bytes| SectionData {
+        tag: *tag,
+        elem,
+        bytes,
+    };
+    model_file::write(
+        KIND,
+        FORMAT_VERSION,
+        &[
+            s(b"HEAD", ElemType::U32, &h[..16]),
+            s(b"CAMR", ElemType::F32, &c),
+            s(b"MEAN", ElemType::F32, &mean),
+            s(b"EIGS", ElemType::I16, &eigs),
+            s(b"ESCL", ElemType::F32, &escl),
+            s(b"EPRI", ElemType::F32, &epri),
+            s(b"TREE", ElemType::U32, &tree[..8]),
+            s(b"NFEA", ElemType::U16, &nfea[..8]),
+            s(b"NTHR", ElemType::F32, &nthr),
+            s(b"NCHL", ElemType::U32, &nchl[..16]),
+            s(b"LEAF", ElemType::I16, &leaf),
+            s(b"LSCL", ElemType::F32, &lscl),
+        ],
+        out,
+    )
+}
+
+fn le_u32(xs: &[u32]) -> [u8; 16] {
+    let mut out = [0u8; 16];
+    for (i, x) in xs.iter().enumerate().take(4) {
+        out[4 * i..4 * i + 4].copy_from_slice(&x.to_le_bytes());
+    }
+    out
+}
+
+fn le_u16(xs: &[u16]) -> [u8; 16] {
+    let mut out = [0u8; 16];
+    for (i, x) in xs.iter().enumerate().take(8) {
+        out[2 * i..2 * i + 2].copy_from_slice(&x.to_le_bytes());
+    }
+    out
+}

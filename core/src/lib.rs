@@ -45,14 +45,18 @@ pub mod camera;
 pub mod crc;
 pub mod depth;
 pub mod error;
+pub mod fit;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixture;
 pub mod geometry;
+pub mod icp;
 pub mod model_file;
 pub mod planes;
 pub mod probe;
 pub mod rng;
 pub mod salient;
+pub mod shape;
+pub mod spd;
 pub mod time;
 pub mod torso;
 pub mod wire;

@@ -12,3 +12,4 @@ pub mod pose;
 pub mod render;
 pub mod scene;
 pub mod sequence;
+pub mod shape;

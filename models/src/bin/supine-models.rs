@@ -22,13 +22,25 @@ enum Command {
     Sequence(supine_models::sequence::cli::SequenceArgs),
     /// Compare synthetic depth noise with real Kinect frames (holes, jumps, mixed pixels, angles, steps) [--json, --png]
     NoiseReport(supine_models::noise_report::cli::NoiseReportArgs),
-    /// Evaluate against generated ground truth
+    /// Train a model from a dataset
+    #[command(subcommand)]
+    Train(TrainCommand),
+    /// Evaluate a model on held-out data (test split of a dataset, or generated sequences)
     #[command(subcommand)]
     Eval(EvalCommand),
 }
 
 #[derive(Subcommand)]
+enum TrainCommand {
+    /// The shape model: canonical-view subspace (randomised SVD) and shape regression forest [default out:
+    /// models/artifacts/shape.ssm]
+    Shape(supine_models::shape::cli::TrainShapeArgs),
+}
+
+#[derive(Subcommand)]
 enum EvalCommand {
+    /// Shape from one frame (subspace, plain fitting, combined; paper Fig. 5) on the held-out bodies
+    Shape(supine_models::shape::cli::EvalShapeArgs),
     /// `supine calibrate`'s session on calibration sequences: extrinsic error for 6, 10, 20 poses
     Calibration(supine_models::eval::calibration::CalibrationEvalArgs),
 }
@@ -41,6 +53,8 @@ fn main() -> std::process::ExitCode {
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
         Command::NoiseReport(a) => return supine_models::noise_report::cli::run(a),
+        Command::Train(TrainCommand::Shape(a)) => supine_models::shape::cli::run_train(&a),
+        Command::Eval(EvalCommand::Shape(a)) => supine_models::shape::cli::run_eval(&a),
         Command::Eval(EvalCommand::Calibration(a)) => return supine_models::eval::calibration::run(&a),
     };
     match result {

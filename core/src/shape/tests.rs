@@ -1,0 +1,213 @@
+//! Tests of the canonical view, the masked projection, the forest and the `SHAP` file view.
+
+use super::canonical::{CanonicalCamera, NO_VALUE, body_frame, canonical_view};
+use super::*;
+use crate::fixture::{self, SHAPE_H, SHAPE_LEAF_SCALE, SHAPE_LEAVES, SHAPE_W, TINY_SHAPE_LEN};
+use crate::geometry::Vector3;
+use crate::time::Timestamp;
+
+const W: usize = 160;
+const H: usize = 120;
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics {
+        fx: 140.0,
+        fy: 140.0,
+        cx: 80.0,
+        cy: 60.0,
+        width: W as u16,
+        height: H as u16,
+    }
+}
+
+/// Hips at 1.5 m on the optical axis, shoulders along +x of the camera, the mattress 0.1 m behind the hips facing
+/// the camera: body z = −camera z, body y = camera x, body x = camera y.
+fn scene_points() -> ([Point3; SalientPoint::COUNT], Plane) {
+    let pts = [
+        Point3::new(0.6, 0.0, 1.5),
+        Point3::new(0.5, 0.15, 1.5),
+        Point3::new(0.5, -0.15, 1.5),
+        Point3::new(0.2, 0.0, 1.4),
+        Point3::new(0.0, 0.12, 1.5),
+        Point3::new(0.0, -0.12, 1.5),
+    ];
+    (pts, Plane::through(Vector3::new(0.0, 0.0, 1.6), -Vector3::z()))
+}
+
+#[test]
+fn the_body_frame_follows_hips_shoulders_and_bed() {
+    let (pts, bed) = scene_points();
+    let t = body_frame(&pts, &bed.normal()).unwrap();
+    let p = t * Point3::new(0.1, 0.2, 0.3);
+    // body (x, y, z) → camera (y, x, 1.5 − z).
+    assert!((p - Point3::new(0.2, 0.1, 1.2)).norm() < 1e-5, "{p:?}");
+    let mut flat = pts;
+    flat[1] = flat[4];
+    flat[2] = flat[5];
+    assert!(body_frame(&flat, &bed.normal()).is_err());
+}
+
+#[test]
+fn canonical_view_of_a_plane_and_a_box_is_exact() {
+    let (pts, bed) = scene_points();
+    let k = intrinsics();
+    // A plane 5 cm above the hips (1450 mm) with a box whose top is 15 cm above them (1350 mm) over pixel columns
+    // 90..120, rows 40..80.
+    let mut depth = [1450u16; W * H];
+    for v in 40..80 {
+        for u in 90..120 {
+            depth[v * W + u] = 1350;
+        }
+    }
+    let frame = DepthFrame::new(&depth, W as u16, H as u16, Timestamp::default(), 0).unwrap();
+    let cam = CanonicalCamera::with_pitch(0.05, 1);
+    let t = body_frame(&pts, &bed.normal()).unwrap();
+    let mut out = [0.0f32; 28 * 20];
+    assert_eq!(cam.pixels(), out.len());
+    let visible = canonical_view(&frame, &k, &t, &bed, &cam, &mut out).unwrap();
+    assert!(visible > 200, "visible {visible}");
+    let (mut on_box, mut on_plane) = (0, 0);
+    for cv in 0..cam.height as usize {
+        for cu in 0..cam.width as usize {
+            let x = out[cv * cam.width as usize + cu];
+            if x == NO_VALUE {
+                continue;
+            }
+            assert!(
+                (x - 0.05).abs() < 1e-4 || (x - 0.15).abs() < 1e-4,
+                "pixel ({cu}, {cv}) = {x}"
+            );
+            // Where the pixel centre of either surface lands in the depth image decides what it must show.
+            let seen = |h: f32| {
+                let z = cam.distance_m - h;
+                let pb = Point3::new(
+                    (cv as f32 - cam.cy) * z / cam.focal_px,
+                    (cu as f32 - cam.cx) * z / cam.focal_px,
+                    h,
+                );
+                k.project(&(t * pb)).unwrap()
+            };
+            let b = seen(0.15);
+            let inside = |uv: crate::geometry::Point2, m: f32| {
+                uv.x > 90.0 + m && uv.x < 119.0 - m && uv.y > 40.0 + m && uv.y < 79.0 - m
+            };
+            if inside(b, 5.0) {
+                assert!((x - 0.15).abs() < 1e-4, "box pixel ({cu}, {cv}) = {x}");
+                on_box += 1;
+            }
+            if !inside(seen(0.05), -5.0) && !inside(b, -5.0) {
+                assert!((x - 0.05).abs() < 1e-4, "plane pixel ({cu}, {cv}) = {x}");
+                on_plane += 1;
+            }
+        }
+    }
+    assert!(on_box >= 4 && on_plane > 100, "box {on_box}, plane {on_plane}");
+    // The wrong buffer size is an error.
+    assert!(canonical_view(&frame, &k, &t, &bed, &cam, &mut out[..10]).is_err());
+}
+
+fn tiny() -> ([u8; TINY_SHAPE_LEN], usize) {
+    let mut buf = [0u8; TINY_SHAPE_LEN];
+    let n = fixture::tiny_shape_model(&mut buf).unwrap();
+    (buf, n)
+}
+
+#[test]
+fn masked_projection_recovers_known_coefficients() {
+    let (buf, n) = tiny();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.pixels(), SHAPE_W * SHAPE_H);
+    let s = m.subspace();
+    let mut c = [0.0f32; SUBSPACE_DIM];
+    for (k, x) in c.iter_mut().enumerate() {
+        *x = 0.3 * (k as f32 - 9.5) / 10.0;
+    }
+    let mut img = [0.0f32; SHAPE_W * SHAPE_H];
+    for (i, x) in img.iter_mut().enumerate() {
+        *x = s.reconstruct_at(i, &c);
+    }
+    // Hide a quarter of the pixels (as an occluder would): the visible ones still determine c.
+    for i in (0..img.len()).step_by(4) {
+        img[i] = NO_VALUE;
+    }
+    let (got, visible) = s.project(&img).unwrap();
+    assert_eq!(visible, 36);
+    for k in 0..SUBSPACE_DIM {
+        assert!((got[k] - c[k]).abs() < 2e-3, "c[{k}] {} vs {}", got[k], c[k]);
+    }
+    // Fewer visible pixels than unknowns is an error, not a guess.
+    let mut few = [NO_VALUE; SHAPE_W * SHAPE_H];
+    few[..10].fill(0.1);
+    assert_eq!(s.project(&few), Err(ProjectError::TooFewPixels { visible: 10 }));
+}
+
+#[test]
+fn the_forest_averages_its_trees_leaves() {
+    let (buf, n) = tiny();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.forest().tree_count(), 2);
+    let mut c = [0.0f32; SUBSPACE_DIM];
+    c[0] = -1.0;
+    let left = m.forest().predict(&c);
+    c[0] = 1.0;
+    let right = m.forest().predict(&c);
+    for k in 0..SHAPE_COMPONENTS {
+        let want_l = (SHAPE_LEAVES[0][k] + SHAPE_LEAVES[2][k]) as f32 * SHAPE_LEAF_SCALE / 2.0;
+        let want_r = (SHAPE_LEAVES[1][k] + SHAPE_LEAVES[2][k]) as f32 * SHAPE_LEAF_SCALE / 2.0;
+        assert!((left[k] - want_l).abs() < 1e-6 && (right[k] - want_r).abs() < 1e-6);
+    }
+}
+
+#[test]
+fn damaged_shape_files_are_errors_not_panics() {
+    let (buf, n) = tiny();
+    for at in 0..n {
+        let mut bad = buf;
+        bad[at] ^= 0x5A;
+        assert!(
+            ShapeModelView::parse(&bad[..n]).is_err(),
+            "flip at byte {at} accepted"
+        );
+    }
+    for len in (0..n).step_by(7) {
+        assert!(
+            ShapeModelView::parse(&buf[..len]).is_err(),
+            "truncated to {len} accepted"
+        );
+    }
+    let mut body = [0u8; fixture::TINY_BODY_LEN];
+    let b = fixture::tiny_body_model(&mut body).unwrap();
+    assert!(matches!(
+        ShapeModelView::parse(&body[..b]),
+        Err(ModelFileError::WrongKind { .. })
+    ));
+}
+
+#[test]
+fn a_forest_whose_child_points_backwards_is_rejected() {
+    // Re-write the fixture with node 0's left child pointing at itself: valid container, invalid forest.
+    let (buf, n) = tiny();
+    let file = ModelFile::parse(&buf[..n], KIND, FORMAT_VERSION).unwrap();
+    let mut sections = [None; 12];
+    for (i, s) in sections.iter_mut().enumerate() {
+        *s = file.section_at(i);
+    }
+    let mut nchl = [0u8; 16];
+    nchl[4..8].copy_from_slice(&0u32.to_le_bytes());
+    nchl[8..12].copy_from_slice(&1u32.to_le_bytes());
+    nchl[12..16].copy_from_slice(&2u32.to_le_bytes());
+    let data = sections.map(|s| {
+        let s = s.unwrap();
+        crate::model_file::SectionData {
+            tag: s.tag,
+            elem: s.elem,
+            bytes: if &s.tag == b"NCHL" { &nchl } else { s.bytes },
+        }
+    });
+    let mut out = [0u8; TINY_SHAPE_LEN];
+    let m = crate::model_file::write(KIND, FORMAT_VERSION, &data, &mut out).unwrap();
+    assert!(matches!(
+        ShapeModelView::parse(&out[..m]),
+        Err(ModelFileError::InvalidData { .. })
+    ));
+}

@@ -1,0 +1,225 @@
+//! `supine-models train shape` and `supine-models eval shape`: arguments, progress, model file, JSON and PNGs.
+
+use anyhow::{Context, Result};
+use clap::Args;
+use std::path::PathBuf;
+
+use super::eval::{EvalConfig, evaluate};
+use super::train::{TrainConfig, train};
+use crate::body::BodyModel;
+use crate::dataset::Dataset;
+
+/// `train shape` options.
+#[derive(Args, Debug)]
+pub struct TrainShapeArgs {
+    /// Dataset directory (`supine-models dataset`).
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Output model file [default: models/artifacts/shape.ssm].
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Canonical pixel pitch at the hip plane, millimetres.
+    #[arg(long, default_value_t = 12.5)]
+    pub pitch_mm: f32,
+    /// Depth-pixel stride of the canonical view.
+    #[arg(long, default_value_t = 2)]
+    pub stride: u16,
+    /// Seed.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Per-axis SD of the salient-point noise standing in for the joint forest, millimetres.
+    #[arg(long, default_value_t = 30.0)]
+    pub point_noise_mm: f32,
+    /// Trees of the shape forest.
+    #[arg(long, default_value_t = 16)]
+    pub trees: usize,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Write the training report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Keep the validation part of the training bodies out of the final forest (score choices with
+    /// `eval shape --split validation`).
+    #[arg(long)]
+    pub holdout_validation: bool,
+    /// Write the mean and first eigen-images and a few canonical views (clean, noisy) as PNGs into this folder.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+}
+
+/// `eval shape` options.
+#[derive(Args, Debug)]
+pub struct EvalShapeArgs {
+    /// Dataset directory.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Shape model [default: models/artifacts/shape.ssm].
+    #[arg(long)]
+    pub model: Option<PathBuf>,
+    /// Body model [default: models/artifacts/body.sbm].
+    #[arg(long)]
+    pub body_model: Option<PathBuf>,
+    /// Seed of the salient-point noise.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Per-axis SD of the salient-point noise, millimetres.
+    #[arg(long, default_value_t = 30.0)]
+    pub point_noise_mm: f32,
+    /// Residual unit of Eq. 7, millimetres.
+    #[arg(long, default_value_t = 10.0)]
+    pub length_unit_mm: f32,
+    /// Starts of the plain model fit.
+    #[arg(long, default_value_t = 5)]
+    pub plain_starts: usize,
+    /// Use at most this many bodies (0 = all).
+    #[arg(long, default_value_t = 0)]
+    pub max_bodies: usize,
+    /// Evaluate on `test` (default) or on the `validation` part of the training bodies (for choices).
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Write the report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write the Fig. 5 PNG charts into this folder.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+}
+
+/// Run `train shape`.
+pub fn run_train(a: &TrainShapeArgs) -> Result<()> {
+    if let Some(t) = a.threads {
+        rayon::ThreadPoolBuilder::new().num_threads(t).build_global().ok();
+    }
+    anyhow::ensure!(
+        a.pitch_mm >= 2.0 && a.pitch_mm <= 100.0,
+        "--pitch-mm must lie in 2..100"
+    );
+    anyhow::ensure!(a.trees >= 1 && a.trees <= 256, "--trees must lie in 1..256");
+    let ds = Dataset::open(&a.data).with_context(|| format!("opening dataset {}", a.data.display()))?;
+    let cfg = TrainConfig {
+        pitch_m: a.pitch_mm * 1e-3,
+        stride: a.stride.max(1),
+        seed: a.seed,
+        point_noise_m: a.point_noise_mm * 1e-3,
+        pixel_noise_m: 0.01,
+        trees: a.trees,
+        em_rounds: 1,
+        holdout_validation: a.holdout_validation,
+    };
+    let t = train(&ds, &cfg, a.png.as_deref())?;
+    let out = a.out.clone().unwrap_or_else(super::default_artifact_path);
+    std::fs::write(&out, &t.bytes).with_context(|| format!("writing {}", out.display()))?;
+    let mut report = t.report;
+    report["out"] = out.display().to_string().into();
+    report["model_bytes"] = t.bytes.len().into();
+    eprintln!("{}", serde_json::to_string_pretty(&report)?);
+    if let Some(j) = &a.json {
+        std::fs::write(j, serde_json::to_string_pretty(&report)?)
+            .with_context(|| format!("writing {}", j.display()))?;
+    }
+    Ok(())
+}
+
+/// Run `eval shape`.
+pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
+    anyhow::ensure!(
+        a.split == "test" || a.split == "validation",
+        "--split must be test or validation"
+    );
+    let ds = Dataset::open(&a.data).with_context(|| format!("opening dataset {}", a.data.display()))?;
+    let model = match &a.body_model {
+        Some(p) => BodyModel::load(p)?,
+        None => BodyModel::load_default()?,
+    };
+    let path = a.model.clone().unwrap_or_else(super::default_artifact_path);
+    let bytes = std::fs::read(&path).with_context(|| format!("reading shape model {}", path.display()))?;
+    let cfg = EvalConfig {
+        seed: a.seed,
+        point_noise_m: a.point_noise_mm * 1e-3,
+        length_unit_m: a.length_unit_mm * 1e-3,
+        plain_starts: a.plain_starts,
+        max_bodies: a.max_bodies,
+        split: a.split.clone(),
+    };
+    let r = evaluate(&ds, &model, &bytes, &cfg)?;
+    print_table(&r);
+    if let Some(j) = &a.json {
+        std::fs::write(j, serde_json::to_string_pretty(&r)?)
+            .with_context(|| format!("writing {}", j.display()))?;
+    }
+    if let Some(dir) = &a.png {
+        std::fs::create_dir_all(dir)?;
+        let torso: Vec<usize> = r["torso_coeffs"]
+            .as_array()
+            .map(|v| v.iter().filter_map(|x| x.as_u64()).map(|x| x as usize).collect())
+            .unwrap_or_default();
+        let mut coeffs: Vec<usize> = (0..5).collect();
+        coeffs.extend(torso.iter().filter(|t| **t >= 5));
+        for (key, file) in [
+            ("coeff_nrmse", "shape_fig5_nrmse.png"),
+            ("coeff_sd", "shape_fig5_sd.png"),
+        ] {
+            let groups: Vec<Vec<f64>> = coeffs
+                .iter()
+                .map(|&c| {
+                    ["subspace", "fitting", "combined"]
+                        .iter()
+                        .map(|m| r[*m][key][c].as_f64().unwrap_or(0.0))
+                        .collect()
+                })
+                .collect();
+            super::chart::bar_chart(&dir.join(file), &groups, 1.2, 0.1)?;
+        }
+        let v: Vec<Vec<f64>> = ["vertex_error_mm_mean", "vertex_error_mm_sd"]
+            .iter()
+            .map(|k| {
+                ["subspace", "fitting", "combined"]
+                    .iter()
+                    .map(|m| r[*m][*k].as_f64().unwrap_or(0.0))
+                    .collect()
+            })
+            .collect();
+        super::chart::bar_chart(&dir.join("shape_vertex_error.png"), &v, 40.0, 5.0)?;
+    }
+    Ok(())
+}
+
+fn print_table(r: &serde_json::Value) {
+    println!(
+        "torso_coeffs {}   images {}   seed {}   commit {}",
+        r["torso_coeffs"], r["images"], r["seed"], r["commit"]
+    );
+    println!(
+        "{:<14} {:>4} {:>44} {:>10} {:>7} {:>10} {:>9} {:>9}",
+        "method", "n", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "hip-al. mm", "ms/frame", "rejected"
+    );
+    for m in ["subspace", "fitting", "combined", "mean_shape"] {
+        for (label, j) in [(m.to_string(), &r[m]), (format!("{m}+arm"), &r[m]["with_arm"])] {
+            let c: Vec<String> = (0..5)
+                .map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN)))
+                .collect();
+            println!(
+                "{:<14} {:>4} {:>44} {:>10.1} {:>7.1} {:>10.1} {:>9.1} {:>9.3}",
+                label,
+                j["frames"],
+                c.join(" "),
+                j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_mm_sd"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_hip_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["ms_per_frame"].as_f64().unwrap_or(f64::NAN),
+                j["rejected_fraction"].as_f64().unwrap_or(f64::NAN)
+            );
+        }
+    }
+    if let Some(m) = r["multi_frame"].as_array() {
+        for j in m {
+            println!(
+                "multi-frame N={:<3} vertex {:.1} mm  s1 NRMSE {:.3}",
+                j["views"],
+                j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["coeff_nrmse"][1].as_f64().unwrap_or(f64::NAN)
+            );
+        }
+    }
+}

@@ -1,0 +1,404 @@
+//! `eval shape` (paper §4.2, Fig. 5) on the held-out bodies: subspace regression, plain model fitting (from the
+//! mean, several starts, results beyond ±3σ rejected and counted) and their combination; coefficient NRMSE and
+//! error SD (σ units), the dense upper-body vertex error in the true pose, ms per frame; arm views apart; and the
+//! multi-frame estimate (per-coefficient median over N views) against N.
+//!
+//! Cost per frame: subspace ~3 ms, combined fit ~10 ms, plain fit 5 starts, plus four posings (LBS) for the errors.
+
+use anyhow::Result;
+use indicatif::{ProgressBar, ProgressStyle};
+use nalgebra::{Point3, Vector3};
+use std::time::Instant;
+use supine_core::body_model::BodyModelView;
+use supine_core::depth::DepthFrame;
+use supine_core::fit::{FitParams, fit_shape, initial_pose};
+use supine_core::icp::IcpParams;
+use supine_core::shape::ShapeModelView;
+use supine_core::time::Timestamp;
+
+use super::data::{ShapeFrame, body_pose, frames_of, intrinsics};
+use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
+use crate::dataset::Dataset;
+use crate::pose::Pose;
+
+/// Coefficients (by index) whose variation lies mostly on the torso: each one's share of the torso subset's
+/// shape variance is at least `min_share`, and it moves torso vertices at least as much as the body's average.
+pub fn torso_coeffs(model: &BodyModel, min_share: f64) -> (Vec<usize>, Vec<(f64, f64)>) {
+    let k = crate::body::COMPONENTS;
+    let energy = |verts: &mut dyn Iterator<Item = usize>| {
+        let mut e = vec![0.0f64; k];
+        for v in verts {
+            for c in 0..3 {
+                for (j, ej) in e.iter_mut().enumerate() {
+                    let b = model.basis[(3 * v + c) * k + j] as f64 * model.sigma[j] as f64;
+                    *ej += b * b;
+                }
+            }
+        }
+        e
+    };
+    let torso = energy(&mut model.torso_subset.iter().map(|&v| v as usize));
+    let all = energy(&mut (0..model.n_vertices));
+    let total: f64 = torso.iter().sum();
+    let frac = model.torso_subset.len() as f64 / model.n_vertices as f64;
+    let stats: Vec<(f64, f64)> = (0..k)
+        .map(|j| (torso[j] / total, (torso[j] / all[j].max(1e-30)) / frac))
+        .collect();
+    let picked = (0..k)
+        .filter(|&j| stats[j].0 >= min_share && stats[j].1 >= 1.0)
+        .collect();
+    (picked, stats)
+}
+
+/// Whether a vertex belongs to the upper body (head, neck, trunk, upper arms).
+pub fn upper_body(part: u8) -> bool {
+    matches!(
+        BodyPart::from_u8(part),
+        Some(
+            BodyPart::Head
+                | BodyPart::Neck
+                | BodyPart::Chest
+                | BodyPart::Abdomen
+                | BodyPart::Pelvis
+                | BodyPart::LeftUpperArm
+                | BodyPart::RightUpperArm
+        )
+    )
+}
+
+/// Accumulated errors of one method.
+#[derive(Default, Clone)]
+pub struct Stats {
+    n: usize,
+    se: [f64; 20],
+    sum: [f64; 20],
+    v_sum: f64,
+    v_sq: f64,
+    v_n: f64,
+    h_sum: f64,
+    h_sq: f64,
+    ms: f64,
+    ms_n: usize,
+    rejected: usize,
+    tried: usize,
+    rms_sum: f64,
+    pairs_sum: f64,
+    occl_sum: f64,
+    fit_n: usize,
+}
+
+impl Stats {
+    fn add(&mut self, est: &[f32; 20], truth: &[f32; 20], vertex_err: &[f32], hip_err: &[f32]) {
+        for &e in hip_err {
+            self.h_sum += e as f64;
+            self.h_sq += (e as f64).powi(2);
+        }
+        self.n += 1;
+        for k in 0..20 {
+            let e = (est[k] - truth[k]) as f64;
+            self.se[k] += e * e;
+            self.sum[k] += e;
+        }
+        for &e in vertex_err {
+            self.v_sum += e as f64;
+            self.v_sq += (e as f64).powi(2);
+        }
+        self.v_n += vertex_err.len() as f64;
+    }
+
+    fn json(&self) -> serde_json::Value {
+        let n = self.n.max(1) as f64;
+        let nrmse: Vec<f64> = self.se.iter().map(|s| (s / n).sqrt()).collect();
+        let sd: Vec<f64> = (0..20)
+            .map(|k| (self.se[k] / n - (self.sum[k] / n).powi(2)).max(0.0).sqrt())
+            .collect();
+        let vm = self.v_sum / self.v_n.max(1.0);
+        let vsd = (self.v_sq / self.v_n.max(1.0) - vm * vm).max(0.0).sqrt();
+        let hm = self.h_sum / self.v_n.max(1.0);
+        let hsd = (self.h_sq / self.v_n.max(1.0) - hm * hm).max(0.0).sqrt();
+        serde_json::json!({
+            "frames": self.n,
+            "vertex_error_hip_mm_mean": hm * 1000.0,
+            "vertex_error_hip_mm_sd": hsd * 1000.0,
+            "coeff_nrmse": nrmse,
+            "coeff_sd": sd,
+            "vertex_error_mm_mean": vm * 1000.0,
+            "vertex_error_mm_sd": vsd * 1000.0,
+            "ms_per_frame": self.ms / self.ms_n.max(1) as f64,
+            "fit_residual_mm": self.rms_sum / self.fit_n.max(1) as f64 * 1000.0,
+            "fit_pairs": self.pairs_sum / self.fit_n.max(1) as f64,
+            "fit_occluded": self.occl_sum / self.fit_n.max(1) as f64,
+            "rejected_fraction": if self.tried > 0 { self.rejected as f64 / self.tried as f64 } else { 0.0 },
+        })
+    }
+}
+
+/// Upper-body vertex errors (metres) of `est` against the true posed upper body: as posed in the body frame (no
+/// alignment), and with the estimated body moved so its hip centre meets the true one (how the tracker places it).
+fn vertex_errors(
+    model: &BodyModel,
+    pose: &Pose,
+    est: &[f32; 20],
+    truth: &PosedBody<'_>,
+    mask: &[bool],
+) -> (Vec<f32>, Vec<f32>) {
+    let posed = model.pose(&Shape::from_normalised(model, est), pose);
+    let hip = |b: &PosedBody<'_>| {
+        (Vector3::from(b.salient_points[SalientPoint::LeftHip.index()])
+            + Vector3::from(b.salient_points[SalientPoint::RightHip.index()]))
+            * 0.5
+    };
+    let shift = hip(truth) - hip(&posed);
+    let pairs = posed
+        .vertices
+        .iter()
+        .zip(&truth.vertices)
+        .zip(mask)
+        .filter(|(_, m)| **m);
+    let raw = pairs
+        .clone()
+        .map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm())
+        .collect();
+    let hip_aligned = pairs
+        .map(|((a, b), _)| (Vector3::from(*a) + shift - Vector3::from(*b)).norm())
+        .collect();
+    (raw, hip_aligned)
+}
+
+/// Evaluation settings.
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct EvalConfig {
+    /// Seed of the salient-point noise.
+    pub seed: u64,
+    /// Per-axis salient-point noise (metres).
+    pub point_noise_m: f32,
+    /// Residual unit of Eq. 7 (metres).
+    pub length_unit_m: f32,
+    /// Starts of the plain fit.
+    pub plain_starts: usize,
+    /// Test bodies used at most (0 = all).
+    pub max_bodies: usize,
+    /// Which bodies: "test" or "validation".
+    pub split: String,
+}
+
+/// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients.
+fn plain_starts(n: usize) -> Vec<[f32; 20]> {
+    let mut v = vec![[0.0f32; 20]];
+    for (k, s) in [(0, 1.5f32), (0, -1.5), (1, 1.5), (1, -1.5)] {
+        let mut z = [0.0; 20];
+        z[k] = s;
+        v.push(z);
+    }
+    v.truncate(n.max(1));
+    v
+}
+
+/// Run the evaluation; returns the JSON report.
+pub fn evaluate(
+    ds: &Dataset,
+    model: &BodyModel,
+    shape_bytes: &[u8],
+    cfg: &EvalConfig,
+) -> Result<serde_json::Value> {
+    let shape = ShapeModelView::parse(shape_bytes).map_err(|e| anyhow::anyhow!("shape model: {e}"))?;
+    let body: BodyModelView<'_> = model.view();
+    let k = intrinsics(ds);
+    let (torso, torso_stats) = torso_coeffs(model, 0.03);
+    let mask: Vec<bool> = model.part_of_vertex.iter().map(|&p| upper_body(p)).collect();
+    let mut bodies = match cfg.split.as_str() {
+        "validation" => super::data::train_validation(ds).1,
+        _ => ds.test.clone(),
+    };
+    if cfg.max_bodies > 0 {
+        bodies.truncate(cfg.max_bodies);
+    }
+    let names = ["subspace", "fitting", "combined", "mean_shape"];
+    let mut all: Vec<Stats> = vec![Stats::default(); 4];
+    let mut arm: Vec<Stats> = vec![Stats::default(); 4];
+    let mut no_arm: Vec<Stats> = vec![Stats::default(); 4];
+    let ns = [1usize, 2, 4, 8, 12];
+    let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
+    let mut canonical = vec![0.0f32; shape.pixels()];
+    let mut subset = vec![[0.0f32; 3]; body.counts().subset];
+    let mut normals = subset.clone();
+    let mut images = 0;
+    let mut failures = 0;
+    let bar = ProgressBar::new(bodies.len() as u64).with_style(
+        ProgressStyle::with_template("eval shape {bar:40} {pos}/{len} bodies {elapsed}")
+            .expect("valid template"),
+    );
+    for &b in &bodies {
+        let rec = ds.read_body(b)?;
+        let pose = body_pose(&rec)?;
+        let frames: Vec<ShapeFrame> = frames_of(&rec, &k, cfg.seed, cfg.point_noise_m);
+        let Some(first) = frames.first() else { continue };
+        let truth_shape = first.shape;
+        let truth_posed = model.pose(&Shape::from_normalised(model, &truth_shape), &pose);
+        let mut per_view = Vec::new();
+        for f in &frames {
+            images += 1;
+            let frame = DepthFrame::new(&f.depth, k.width, k.height, Timestamp::default(), f.view as u32)
+                .map_err(|e| anyhow::anyhow!("dataset frame: {e}"))?;
+            let pts: [Point3<f32>; 6] = f.noisy_points;
+            let icp = IcpParams::new(f.mattress);
+            let up = f.mattress.normal();
+            // Subspace regression.
+            let t0 = Instant::now();
+            let est = shape.estimate(&frame, &k, &pts, &f.mattress, &mut canonical);
+            let ms_sub = t0.elapsed().as_secs_f64() * 1e3;
+            let Ok(est) = est else {
+                failures += 1;
+                continue;
+            };
+            per_view.push(est.shape);
+            // Combined: fit from the subspace estimate.
+            let t1 = Instant::now();
+            let mut p = FitParams::combined(icp, &torso);
+            p.length_unit_m = cfg.length_unit_m;
+            let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
+                fit_shape(
+                    &body,
+                    &frame,
+                    &k,
+                    &est.shape,
+                    pose0,
+                    &p,
+                    &mut subset,
+                    &mut normals,
+                )
+                .ok()
+            });
+            let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
+            // Plain fitting: several starts from the mean, the best residual wins.
+            let t2 = Instant::now();
+            let mut pp = FitParams::plain(icp);
+            pp.length_unit_m = cfg.length_unit_m;
+            let mut best: Option<supine_core::fit::FitResult> = None;
+            for z0 in plain_starts(cfg.plain_starts) {
+                let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else {
+                    continue;
+                };
+                if let Ok(r) = fit_shape(&body, &frame, &k, &z0, pose0, &pp, &mut subset, &mut normals)
+                    && best.is_none_or(|b| r.association.rms_m() < b.association.rms_m())
+                {
+                    best = Some(r);
+                }
+            }
+            let ms_plain = t2.elapsed().as_secs_f64() * 1e3;
+            let assoc = [
+                None,
+                best.map(|r| r.association),
+                combined.map(|r| r.association),
+                None,
+            ];
+            let results: [Option<[f32; 20]>; 4] = [
+                Some(est.shape),
+                best.map(|r| r.shape),
+                combined.map(|r| r.shape),
+                Some([0.0; 20]),
+            ];
+            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0];
+            for m in 0..4 {
+                let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
+                    vec![&mut all, &mut arm]
+                } else if f.with_arm {
+                    vec![&mut all]
+                } else {
+                    vec![&mut all, &mut no_arm]
+                };
+                let mut errs = None;
+                for g in groups {
+                    let s = &mut g[m];
+                    s.ms += ms[m];
+                    s.ms_n += 1;
+                    s.tried += 1;
+                    if let Some(a) = assoc[m] {
+                        s.fit_n += 1;
+                        s.rms_sum += a.rms_m() as f64;
+                        s.pairs_sum += a.pairs as f64;
+                        s.occl_sum += a.occluded as f64;
+                    }
+                    match results[m] {
+                        Some(z) if m != 1 || z.iter().all(|x| x.abs() <= 3.0) => {
+                            let e = errs
+                                .get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed, &mask));
+                            s.add(&z, &truth_shape, &e.0, &e.1);
+                        }
+                        _ => s.rejected += 1,
+                    }
+                }
+            }
+        }
+        for (i, &n) in ns.iter().enumerate() {
+            if per_view.len() >= n {
+                let mut z = [0.0f32; 20];
+                for (c, zc) in z.iter_mut().enumerate() {
+                    let mut v: Vec<f32> = per_view[..n].iter().map(|s| s[c]).collect();
+                    v.sort_by(f32::total_cmp);
+                    *zc = if n % 2 == 1 {
+                        v[n / 2]
+                    } else {
+                        0.5 * (v[n / 2 - 1] + v[n / 2])
+                    };
+                }
+                let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
+                multi[i].add(&z, &truth_shape, &e.0, &e.1);
+            }
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let mut report = serde_json::json!({
+        "torso_coeffs": torso,
+        "torso_variance_share": torso_stats.iter().map(|s| s.0).collect::<Vec<_>>(),
+        "torso_concentration": torso_stats.iter().map(|s| s.1).collect::<Vec<_>>(),
+        "seed": cfg.seed,
+        "images": images,
+        "bodies": bodies.len(),
+        "split": cfg.split,
+        "estimate_failures": failures,
+        "config": cfg,
+        "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,
+                       "pitch_m": shape.camera().distance_m / shape.camera().focal_px},
+        "model_bytes": shape_bytes.len(),
+        "commit": commit(),
+    });
+    for (m, name) in names.iter().enumerate() {
+        let mut j = all[m].json();
+        j["with_arm"] = arm[m].json();
+        j["without_arm"] = no_arm[m].json();
+        report[*name] = j;
+    }
+    report["multi_frame"] = serde_json::Value::Array(
+        ns.iter()
+            .zip(&multi)
+            .map(|(n, s)| {
+                let mut j = s.json();
+                j["views"] = (*n).into();
+                j
+            })
+            .collect(),
+    );
+    Ok(report)
+}
+
+/// The workspace's commit (short hash, `-dirty` when the tree has changes), or "unknown".
+pub fn commit() -> String {
+    let run = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    match run(&["rev-parse", "--short", "HEAD"]) {
+        Some(h) => match run(&["status", "--porcelain", "--untracked-files=no"]) {
+            Some(s) if !s.is_empty() => format!("{h}-dirty"),
+            _ => h,
+        },
+        None => "unknown".into(),
+    }
+}
