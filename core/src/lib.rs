@@ -38,6 +38,7 @@ pub mod camera;
 pub mod crc;
 pub mod depth;
 pub mod error;
+pub mod forest;
 pub mod geometry;
 pub mod model_file;
 pub mod salient;

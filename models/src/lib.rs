@@ -6,6 +6,7 @@
 pub mod assets;
 pub mod body;
 pub mod dataset;
+pub mod forest;
 pub mod pose;
 pub mod render;
 pub mod scene;

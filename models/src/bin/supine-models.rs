@@ -20,6 +20,24 @@ enum Command {
     Dataset(supine_models::dataset::cli::DatasetArgs),
     /// Render a 30 Hz tracking sequence (breathing, slow motion, optional robot arm) to DIR/sequence.oni + truth.jsonl
     Sequence(supine_models::sequence::cli::SequenceArgs),
+    /// Train a model from a dataset's training split
+    #[command(subcommand)]
+    Train(TrainCommand),
+    /// Evaluate a model on a dataset's test split
+    #[command(subcommand)]
+    Eval(EvalCommand),
+}
+
+#[derive(Subcommand)]
+enum TrainCommand {
+    /// The joint forest (paper Sect. 3.3) [default out: models/artifacts/joints.jfor]
+    Joints(supine_models::forest::cli::TrainJointsArgs),
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// The joint forest: baseline, refined and quantised on the held-out bodies (paper Fig. 6)
+    Joints(supine_models::forest::cli::EvalJointsArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -29,6 +47,8 @@ fn main() -> std::process::ExitCode {
         Command::Body(a) => supine_models::body::cli::run_body(&a),
         Command::Dataset(a) => return supine_models::dataset::cli::run(a),
         Command::Sequence(a) => return supine_models::sequence::cli::run(a),
+        Command::Train(TrainCommand::Joints(a)) => supine_models::forest::cli::run_train(&a),
+        Command::Eval(EvalCommand::Joints(a)) => supine_models::forest::cli::run_eval(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -1,0 +1,98 @@
+//! Depth-difference features f = d(x + u/d(x)) - d(x + v/d(x)) (Shotton et al. 2011) with offsets `u`, `v` in
+//! pixel·metres (so ±50 means ±50 px at 1 m) and depths in integer millimetres. Off-image and no-depth probes read
+//! [`BACKGROUND_MM`]. Everything is integer, so the trainer and the head computer take the same branch bit for bit.
+//! Cost: two divisions and two depth reads per test.
+
+use crate::depth::DepthFrame;
+
+/// Depth a probe reads off the image or where there is no measurement (Shotton's "large positive constant").
+pub const BACKGROUND_MM: i32 = 10_000;
+/// Largest |offset| component in pixel·metres the model file can store.
+pub const MAX_OFFSET: i32 = 127;
+
+/// One split test: go left when `f(u, v) < threshold_mm`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct SplitTest {
+    /// First probe offset (x, y), pixel·metres.
+    pub u: [i8; 2],
+    /// Second probe offset (x, y), pixel·metres.
+    pub v: [i8; 2],
+    /// Threshold in millimetres.
+    pub threshold_mm: i16,
+}
+
+/// A depth image the features read: millimetres, 0 = no depth, anything outside reads 0.
+pub trait DepthImage {
+    /// Depth at pixel (x, y) in mm, 0 outside the image or without a measurement.
+    fn depth_at(&self, x: i32, y: i32) -> u16;
+}
+
+impl DepthImage for DepthFrame<'_> {
+    #[inline]
+    fn depth_at(&self, x: i32, y: i32) -> u16 {
+        self.at(x, y).unwrap_or(0)
+    }
+}
+
+/// `a / b` rounded to the nearest integer, halves away from zero (`b > 0`).
+#[inline]
+fn div_round(a: i32, b: i32) -> i32 {
+    if a >= 0 {
+        (a + b / 2) / b
+    } else {
+        -((-a + b / 2) / b)
+    }
+}
+
+/// The depth a probe at offset `off` from pixel (x, y) of depth `d_mm` (> 0) reads.
+#[inline]
+pub fn probe<D: DepthImage + ?Sized>(img: &D, x: i32, y: i32, d_mm: u16, off: [i8; 2]) -> i32 {
+    let d = d_mm as i32;
+    let px = x + div_round(off[0] as i32 * 1000, d);
+    let py = y + div_round(off[1] as i32 * 1000, d);
+    match img.depth_at(px, py) {
+        0 => BACKGROUND_MM,
+        z => z as i32,
+    }
+}
+
+impl SplitTest {
+    /// The feature value at pixel (x, y) of depth `d_mm` (> 0), millimetres.
+    #[inline]
+    pub fn feature<D: DepthImage + ?Sized>(&self, img: &D, x: i32, y: i32, d_mm: u16) -> i32 {
+        probe(img, x, y, d_mm, self.u) - probe(img, x, y, d_mm, self.v)
+    }
+
+    /// Whether the sample goes to the left child.
+    #[inline]
+    pub fn goes_left<D: DepthImage + ?Sized>(&self, img: &D, x: i32, y: i32, d_mm: u16) -> bool {
+        self.feature(img, x, y, d_mm) < self.threshold_mm as i32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::time::Timestamp;
+
+    #[test]
+    fn offsets_scale_with_depth_and_background_reads_large() {
+        let mut buf = [0u16; 100 * 10];
+        for (i, d) in buf.iter_mut().enumerate() {
+            *d = 1000 + (i % 100) as u16;
+        }
+        let f = DepthFrame::new(&buf, 100, 10, Timestamp::default(), 0).unwrap();
+        // At 2 m an offset of 40 px·m moves 20 px.
+        assert_eq!(probe(&f, 10, 5, 2000, [40, 0]), 1030);
+        assert_eq!(probe(&f, 10, 5, 2000, [-40, 0]), BACKGROUND_MM);
+        assert_eq!(div_round(-5, 2), -3);
+        assert_eq!(div_round(5, 2), 3);
+        let t = SplitTest {
+            u: [20, 0],
+            v: [0, 0],
+            threshold_mm: 10,
+        };
+        assert_eq!(t.feature(&f, 50, 5, 1000), 20);
+        assert!(!t.goes_left(&f, 50, 5, 1000));
+    }
+}
