@@ -13,6 +13,8 @@
 //! Cost per frame (512 samples, 3 trees of depth 24): about 40 k node tests and 6 mean-shifts over at most 512
 //! votes each; no allocation. The trainer, the quantiser and the evaluation live in `supine-models`
 //! (`models/src/forest`).
+// Axes of 3-vectors and the per-point arrays are indexed in step with each other; index loops read best here.
+#![allow(clippy::needless_range_loop)]
 
 pub mod feature;
 pub mod infer;

@@ -297,3 +297,244 @@ impl ForestModel for ForestView<'_> {
         self.params[point]
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model_file::{ElemType, SectionData, encoded_len, write};
+
+    /// A two-tree forest: tree 0 is one split and two leaves, tree 1 a single leaf; 3 leaves.
+    struct Parts {
+        head: [u32; 4],
+        tree: [u32; 2],
+        split: [i8; 16],
+        thrs: [i16; 4],
+        chld: [u32; 4],
+        rvot: [i16; 3 * P * 3],
+        rcon: [u8; 3 * P],
+        bvot: [i16; 3 * P * MODES * 3],
+        bwgt: [u8; 3 * P * MODES],
+        parm: [f32; P * 3],
+    }
+
+    fn parts() -> Parts {
+        let mut p = Parts {
+            head: [2, 4, 3, 512],
+            tree: [0, 3],
+            split: [0; 16],
+            thrs: [0; 4],
+            chld: [1, LEAF_BIT, LEAF_BIT | 1, LEAF_BIT | 2],
+            rvot: [0; 3 * P * 3],
+            rcon: [0; 3 * P],
+            bvot: [0; 3 * P * MODES * 3],
+            bwgt: [0; 3 * P * MODES],
+            parm: [0.05; P * 3],
+        };
+        p.split[..4].copy_from_slice(&[10, -3, 0, 7]);
+        p.thrs[0] = -25;
+        for (i, v) in p.rvot.iter_mut().enumerate() {
+            *v = i as i16 * 7 - 100;
+        }
+        for (i, v) in p.rcon.iter_mut().enumerate() {
+            *v = (i * 13) as u8;
+        }
+        for (i, v) in p.bvot.iter_mut().enumerate() {
+            *v = 300 - i as i16;
+        }
+        for (i, v) in p.bwgt.iter_mut().enumerate() {
+            *v = (i * 5) as u8;
+        }
+        p
+    }
+
+    fn le<T: Copy, const N: usize>(v: &[T], f: impl Fn(T) -> [u8; N], out: &mut [u8]) -> usize {
+        for (i, &x) in v.iter().enumerate() {
+            out[i * N..i * N + N].copy_from_slice(&f(x));
+        }
+        v.len() * N
+    }
+
+    fn encode(p: &Parts, kind: Tag, out: &mut [u8]) -> usize {
+        let mut b = [[0u8; 512]; 10];
+        let n = [
+            le(&p.head, u32::to_le_bytes, &mut b[0]),
+            le(&p.tree, u32::to_le_bytes, &mut b[1]),
+            le(&p.split, i8::to_le_bytes, &mut b[2]),
+            le(&p.thrs, i16::to_le_bytes, &mut b[3]),
+            le(&p.chld, u32::to_le_bytes, &mut b[4]),
+            le(&p.rvot, i16::to_le_bytes, &mut b[5]),
+            le(&p.rcon, u8::to_le_bytes, &mut b[6]),
+            le(&p.bvot, i16::to_le_bytes, &mut b[7]),
+            le(&p.bwgt, u8::to_le_bytes, &mut b[8]),
+            le(&p.parm, f32::to_le_bytes, &mut b[9]),
+        ];
+        let s = |tag, elem, i: usize| SectionData {
+            tag,
+            elem,
+            bytes: &b[i][..n[i]],
+        };
+        let secs = [
+            s(tags::HEAD, ElemType::U32, 0),
+            s(tags::TREE, ElemType::U32, 1),
+            s(tags::SPLT, ElemType::I8, 2),
+            s(tags::THRS, ElemType::I16, 3),
+            s(tags::CHLD, ElemType::U32, 4),
+            s(tags::RVOT, ElemType::I16, 5),
+            s(tags::RCON, ElemType::U8, 6),
+            s(tags::BVOT, ElemType::I16, 7),
+            s(tags::BWGT, ElemType::U8, 8),
+            s(tags::PARM, ElemType::F32, 9),
+        ];
+        assert!(encoded_len(&secs) <= out.len());
+        write(kind, VERSION, &secs, out).unwrap()
+    }
+
+    /// Read every field back through the view (the inverse of `encode`).
+    fn decode(v: &ForestView<'_>) -> Parts {
+        let mut p = parts();
+        p.head = [
+            v.tree_count() as u32,
+            v.node_count() as u32,
+            v.leaf_count() as u32,
+            v.samples_per_frame() as u32,
+        ];
+        p.split = [0; 16];
+        p.thrs = [0; 4];
+        for t in 0..v.tree_count() {
+            p.tree[t] = v.tree_start[t];
+            for i in 0..(v.tree_start[t + 1] - v.tree_start[t]) {
+                let g = (v.tree_start[t] + i) as usize;
+                p.chld[g] = match v.node(t, i) {
+                    Node::Leaf(l) => LEAF_BIT | l,
+                    Node::Split { test, left } => {
+                        p.split[g * 4..g * 4 + 4]
+                            .copy_from_slice(&[test.u[0], test.u[1], test.v[0], test.v[1]]);
+                        p.thrs[g] = test.threshold_mm;
+                        left
+                    }
+                };
+            }
+        }
+        for l in 0..v.leaf_count() {
+            for pt in 0..P {
+                let r = v.refined(l as u32, pt);
+                let i = l * P + pt;
+                for a in 0..3 {
+                    p.rvot[i * 3 + a] = libm::roundf(r.offset[a] * 1000.0) as i16;
+                }
+                p.rcon[i] = libm::roundf(r.weight * 255.0) as u8;
+                for m in 0..MODES {
+                    let b = v.baseline(l as u32, pt, m);
+                    let j = i * MODES + m;
+                    for a in 0..3 {
+                        p.bvot[j * 3 + a] = libm::roundf(b.offset[a] * 1000.0) as i16;
+                    }
+                    p.bwgt[j] = libm::roundf(b.weight * 255.0) as u8;
+                }
+            }
+            let _ = l;
+        }
+        for pt in 0..P {
+            let q = v.params(pt);
+            p.parm[pt * 3..pt * 3 + 3].copy_from_slice(&[
+                q.refined_bandwidth_m,
+                q.baseline_bandwidth_m,
+                q.vote_length_m,
+            ]);
+        }
+        p
+    }
+
+    #[test]
+    fn exact_byte_round_trip() {
+        let mut a = [0u8; 2048];
+        let n = encode(&parts(), KIND, &mut a);
+        let v = ForestView::parse(&a[..n]).unwrap();
+        assert_eq!((v.tree_count(), v.node_count(), v.leaf_count()), (2, 4, 3));
+        let mut b = [0u8; 2048];
+        let m = encode(&decode(&v), KIND, &mut b);
+        assert_eq!(&a[..n], &b[..m], "decode then encode gives the same bytes");
+        assert_eq!(
+            v.node(0, 0),
+            Node::Split {
+                test: SplitTest {
+                    u: [10, -3],
+                    v: [0, 7],
+                    threshold_mm: -25
+                },
+                left: 1
+            }
+        );
+        assert_eq!(v.node(1, 0), Node::Leaf(2));
+    }
+
+    #[test]
+    fn bad_files_are_distinct_errors() {
+        let mut buf = [0u8; 2048];
+        let n = encode(&parts(), KIND, &mut buf);
+        let good = &buf[..n];
+        assert!(matches!(
+            ForestView::parse(&good[..n - 16]),
+            Err(ModelFileError::Truncated { .. })
+        ));
+        let mut bad = [0u8; 2048];
+        bad[..n].copy_from_slice(good);
+        bad[n - 20] ^= 0x40;
+        assert!(matches!(
+            ForestView::parse(&bad[..n]),
+            Err(ModelFileError::ChecksumMismatch { .. })
+        ));
+        let m = encode(&parts(), *b"BODY", &mut bad);
+        assert!(matches!(
+            ForestView::parse(&bad[..m]),
+            Err(ModelFileError::WrongKind { .. })
+        ));
+        // Structurally valid containers with bad forest data.
+        type Edit = fn(&mut Parts);
+        let cases: [(Edit, Tag); 6] = [
+            (|p| p.chld[0] = 0, tags::CHLD),            // a cycle: child not after its node
+            (|p| p.chld[0] = 2, tags::CHLD),            // right child past the tree's end
+            (|p| p.chld[3] = LEAF_BIT | 3, tags::CHLD), // leaf id out of range
+            (|p| p.tree[1] = 0, tags::TREE),
+            (|p| p.head[0] = 9, tags::HEAD),
+            (|p| p.parm[4] = f32::NAN, tags::PARM),
+        ];
+        for (i, (edit, tag)) in cases.iter().enumerate() {
+            let mut p = parts();
+            edit(&mut p);
+            let m = encode(&p, KIND, &mut bad);
+            match ForestView::parse(&bad[..m]) {
+                Err(ModelFileError::InvalidData { tag: t, .. }) => assert_eq!(t, *tag, "case {i}"),
+                // A tree count of 9 also changes the expected TREE length.
+                Err(ModelFileError::WrongSectionLength { .. }) if i == 4 => {}
+                other => panic!("case {i}: {other:?}"),
+            }
+        }
+        let mut p = parts();
+        p.head[2] = 4; // more leaves than the leaf sections hold
+        let m = encode(&p, KIND, &mut bad);
+        assert!(matches!(
+            ForestView::parse(&bad[..m]),
+            Err(ModelFileError::WrongSectionLength { .. })
+        ));
+    }
+
+    #[test]
+    fn arbitrary_bytes_never_panic() {
+        let mut buf = [0u8; 2048];
+        let n = encode(&parts(), KIND, &mut buf);
+        let mut x: u32 = 0x9E37_79B9;
+        let mut bad = [0u8; 2048];
+        for _ in 0..3000 {
+            bad[..n].copy_from_slice(&buf[..n]);
+            for _ in 0..3 {
+                x ^= x << 13;
+                x ^= x >> 17;
+                x ^= x << 5;
+                bad[x as usize % n] ^= (x >> 8) as u8 | 1;
+            }
+            let _ = ForestView::parse(&bad[..(x as usize >> 4) % (n + 1)]);
+            let _ = ForestView::parse(&bad[..n]);
+        }
+    }
+}

@@ -15,6 +15,9 @@ const P: usize = SalientPoint::COUNT;
 /// Starts of the per-leaf mode search (evenly spread over the subsample).
 const MODE_STARTS: usize = 6;
 
+/// One leaf's body majority, mean offsets, baseline modes and class counts.
+type LeafRow = (bool, [[f32; 3]; P], BaselineLeaf, [u32; 3]);
+
 /// Per-leaf results of [`leaf_statistics`].
 #[derive(Debug, Clone)]
 pub struct LeafStats {
@@ -125,7 +128,7 @@ pub fn leaf_statistics(
         }
     }
     let max_len2 = vote_length_m * vote_length_m;
-    let per_leaf: Vec<(bool, [[f32; 3]; P], BaselineLeaf, [u32; 3])> = (0..n_leaves)
+    let per_leaf: Vec<LeafRow> = (0..n_leaves)
         .into_par_iter()
         .map(|l| {
             let m = &members[start[l] as usize..start[l + 1] as usize];

@@ -2,6 +2,8 @@
 //! classification, Girshick baseline leaves, the global refinement of Eq. 2-4, validation choices), the float
 //! forest and its quantisation to a `JFOR` model file ([`float`]), the evaluation on held-out bodies ([`eval`]) and
 //! the `train joints` / `eval joints` commands ([`cli`]). Inference itself is `supine_core::forest`.
+// Axes of 3-vectors and the per-point arrays are indexed in step with each other; index loops read best here.
+#![allow(clippy::needless_range_loop)]
 
 pub mod chart;
 pub mod cli;

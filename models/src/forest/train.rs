@@ -296,8 +296,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, progress: bool) -> Result<(FloatFo
     let mut kept_ids: Vec<usize> = kept.keys().copied().collect();
     kept_ids.sort_unstable();
     let slot: HashMap<usize, u32> = kept_ids.iter().enumerate().map(|(s, &i)| (i, s as u32)).collect();
-    let kept_imgs: Vec<TrainImage> = kept_ids.iter().map(|i| kept[i].clone()).collect();
-    drop(kept);
+    let kept_imgs: Vec<TrainImage> = kept_ids.iter().filter_map(|i| kept.remove(i)).collect();
     let tree_inputs: Vec<Vec<TrainSample>> = subsets
         .iter()
         .map(|sub| {
