@@ -5,7 +5,7 @@
 //! Cost: samples x trees x depth node tests, then per point one vote pass and one mean-shift.
 
 use crate::camera::Intrinsics;
-use crate::forest::feature::DepthImage;
+use crate::forest::feature::{DepthImage, ProbeScale};
 use crate::forest::meanshift::{Prior, Vote, mean_shift};
 use crate::forest::model::{ForestModel, Node};
 use crate::forest::sample::{Clip, SamplePixel, sample_pixels};
@@ -88,12 +88,13 @@ pub fn descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     y: i32,
     d_mm: u16,
 ) -> u32 {
+    let s = ProbeScale::new(d_mm);
     let mut i = 0u32;
     loop {
         match model.node(tree, i) {
             Node::Leaf(l) => return l,
             Node::Split { test, left } => {
-                i = if test.goes_left(img, x, y, d_mm) {
+                i = if test.goes_left(img, x, y, s) {
                     left
                 } else {
                     left + 1

@@ -10,7 +10,8 @@
 //! THRS i16 [N]        threshold per node, mm
 //! CHLD u32 [N]        LEAF_BIT | leaf id, or the left child's index within the tree (right = left + 1, left > node)
 //! RVOT i16 [L*P*3]    refined leaf weights (Eq. 2), mm
-//! RCON u8  [L*P]      refined leaf confidences v_l = exp(-E_l^2) (Eq. 6), x255
+//! RCON u8  [L*P]      refined leaf confidences v_l = exp(-E_l^2) (Eq. 6) as code c: v_l = exp(-c/8), 255 = 0
+//!                     (log scale: 12 % steps over 14 decades; small confidences must not round to 0)
 //! BVOT i16 [L*P*M*3]  baseline (Girshick) mode offsets, mm
 //! BWGT u8  [L*P*M]    baseline mode weights, x255
 //! PARM f32 [P*3]      per point: refined mean-shift bandwidth, baseline bandwidth, baseline vote length (m)
@@ -33,6 +34,28 @@ pub const VERSION: u16 = 1;
 pub const LEAF_BIT: u32 = 1 << 31;
 /// Points per leaf.
 const P: usize = SalientPoint::COUNT;
+/// `RCON` code meaning "no vote" (leaves whose samples were mostly not body).
+pub const NO_VOTE: u8 = 255;
+/// `RCON` codes per unit of -ln(v_l).
+pub const CONFIDENCE_STEPS: f32 = 8.0;
+
+/// The `RCON` code of confidence `v` (0..1).
+pub fn confidence_code(v: f32) -> u8 {
+    if v.is_nan() || v <= 0.0 {
+        return NO_VOTE;
+    }
+    let c = libm::roundf(-libm::logf(v.min(1.0)) * CONFIDENCE_STEPS);
+    if c >= NO_VOTE as f32 { NO_VOTE - 1 } else { c as u8 }
+}
+
+/// The confidence an `RCON` code stands for.
+pub fn confidence_of(code: u8) -> f32 {
+    if code == NO_VOTE {
+        0.0
+    } else {
+        libm::expf(-(code as f32) / CONFIDENCE_STEPS)
+    }
+}
 
 /// Section tags.
 pub mod tags {
@@ -125,6 +148,7 @@ pub struct ForestView<'a> {
     bvot: LeSlice<'a, i16>,
     bwgt: LeSlice<'a, u8>,
     params: [PointParams; P],
+    confidence: [f32; 256],
 }
 
 fn invalid(tag: Tag, what: &'static str) -> ModelFileError {
@@ -217,6 +241,7 @@ impl<'a> ForestView<'a> {
             bvot,
             bwgt,
             params,
+            confidence: core::array::from_fn(|c| confidence_of(c as u8)),
         })
     }
 
@@ -276,7 +301,7 @@ impl ForestModel for ForestView<'_> {
                 self.rvot.at(i * 3 + 1) as f32 * 1e-3,
                 self.rvot.at(i * 3 + 2) as f32 * 1e-3,
             ],
-            weight: self.rcon.at(i) as f32 * (1.0 / 255.0),
+            weight: self.confidence[self.rcon.at(i) as usize],
         }
     }
 
@@ -422,7 +447,7 @@ mod tests {
                 for a in 0..3 {
                     p.rvot[i * 3 + a] = libm::roundf(r.offset[a] * 1000.0) as i16;
                 }
-                p.rcon[i] = libm::roundf(r.weight * 255.0) as u8;
+                p.rcon[i] = confidence_code(r.weight);
                 for m in 0..MODES {
                     let b = v.baseline(l as u32, pt, m);
                     let j = i * MODES + m;
@@ -443,6 +468,16 @@ mod tests {
             ]);
         }
         p
+    }
+
+    #[test]
+    fn confidence_codes_round_trip() {
+        for c in 0..=255u8 {
+            assert_eq!(confidence_code(confidence_of(c)), c);
+        }
+        assert_eq!(confidence_code(0.0), NO_VOTE);
+        assert_eq!(confidence_code(1.0), 0);
+        assert_eq!(confidence_code(1e-30), NO_VOTE - 1);
     }
 
     #[test]

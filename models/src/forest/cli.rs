@@ -5,7 +5,7 @@ use super::chart::{Panel, bar_chart};
 use super::eval::{Candidate, evaluate, methods_json, text_table};
 use super::refine::RefineParams;
 use super::sidecar::FloatLeaves;
-use super::train::{TrainConfig, train};
+use super::train::{TrainConfig, train_on};
 use super::tree::TreeParams;
 use crate::dataset::Dataset;
 use anyhow::{Context, Result, ensure};
@@ -65,6 +65,24 @@ pub struct TrainJointsArgs {
     /// Refinement epochs.
     #[arg(long, default_value_t = 48)]
     pub epochs: usize,
+    /// Refinement: initial learning rate.
+    #[arg(long, default_value_t = 1.0)]
+    pub lr: f32,
+    /// Refinement: momentum.
+    #[arg(long, default_value_t = 0.8)]
+    pub momentum: f32,
+    /// Refinement: λ1, weight of the image term (Eq. 4).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lambda1: f32,
+    /// Refinement: λ2, weight of the per-sample term (Eq. 4); Table 1 says 1e-4, 1e-2 won on the validation bodies.
+    #[arg(long, default_value_t = 1e-2)]
+    pub lambda2: f32,
+    /// Refinement: L2 strength per step.
+    #[arg(long, default_value_t = 1e-5)]
+    pub l2: f32,
+    /// Baseline vote length threshold, metres.
+    #[arg(long, default_value_t = 0.5)]
+    pub vote_length: f32,
     /// Share of the training bodies held out for validation choices.
     #[arg(long, default_value_t = 0.15)]
     pub validation_fraction: f32,
@@ -74,6 +92,9 @@ pub struct TrainJointsArgs {
     /// Write the training summary (JSON) here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Reuse the trees of this forest file (skips tree growing; leaves, refinement and choices are recomputed).
+    #[arg(long)]
+    pub structure: Option<PathBuf>,
 }
 
 /// Arguments of `eval joints`.
@@ -149,6 +170,14 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "--samples, --depth and --candidates must be positive"
     );
     ensure!(
+        a.lambda1 > 0.0 && a.lambda2 >= 0.0 && a.l2 >= 0.0 && a.lr > 0.0 && (0.0..1.0).contains(&a.momentum),
+        "refinement parameters out of range"
+    );
+    ensure!(
+        a.vote_length > 0.0 && a.vote_length <= 10.0,
+        "--vote-length must be in (0, 10] m"
+    );
+    ensure!(
         (0.0..1.0).contains(&a.validation_fraction),
         "--validation-fraction must be in [0, 1)"
     );
@@ -167,11 +196,25 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         validation_fraction: a.validation_fraction,
         refine: RefineParams {
             epochs: a.epochs,
+            lr: a.lr,
+            momentum: a.momentum,
+            lambda1: a.lambda1,
+            lambda2: a.lambda2,
+            l2: a.l2,
             ..RefineParams::default()
         },
+        vote_length_m: a.vote_length,
         ..TrainConfig::default()
     };
-    let (forest, summary) = pool(a.threads)?.install(|| train(&ds, &cfg, true))?;
+    let structure = match &a.structure {
+        Some(p) => {
+            let b = std::fs::read(p).with_context(|| format!("reading {}", p.display()))?;
+            let v = ForestView::parse(&b).with_context(|| format!("loading {}", p.display()))?;
+            Some(super::tree::trees_from_view(&v)?)
+        }
+        None => None,
+    };
+    let (forest, summary) = pool(a.threads)?.install(|| train_on(&ds, &cfg, structure, true))?;
     let out = a.out.clone().unwrap_or_else(default_path);
     let meta = json!({
         "command": std::env::args().collect::<Vec<_>>().join(" "),

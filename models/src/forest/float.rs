@@ -1,10 +1,11 @@
 //! The trainer's float forest ([`FloatForest`]: the grown trees with f32 leaves, both baseline and refined) and its
 //! quantisation into a `JFOR` model file (offsets and thresholds are already small integers; leaf votes become
-//! i16 mm, confidences and mode weights u8). The float forest runs through core's inference too (it implements
+//! i16 mm, confidences u8 on a log scale, mode weights u8). The float forest runs through core's inference too (it implements
 //! [`ForestModel`]), so "refined" and "quantised" differ only by the quantisation.
 
 use super::tree::Tree;
 use anyhow::{Result, ensure};
+use supine_core::forest::model::confidence_code;
 use supine_core::forest::model::{ForestModel, KIND, LEAF_BIT, LeafVote, Node, PointParams, VERSION, tags};
 use supine_core::forest::{MAX_TREES, MODES};
 use supine_core::model_file::{ElemType, SectionData, encoded_len, write};
@@ -96,7 +97,7 @@ impl FloatForest {
         for l in 0..leaves {
             for p in 0..P {
                 rvot.extend(self.refined[l][p].map(mm));
-                rcon.push(u8w(self.confidence(l, p)));
+                rcon.push(confidence_code(self.confidence(l, p)));
                 for m in 0..MODES {
                     let (o, w) = self.baseline[l][p][m];
                     bvot.extend(o.map(mm));

@@ -7,7 +7,7 @@
 use super::data::{CLASSES, TrainImage, TrainSample};
 use indicatif::ProgressBar;
 use rayon::prelude::*;
-use supine_core::forest::feature::SplitTest;
+use supine_core::forest::feature::{ProbeScale, SplitTest};
 use supine_core::forest::model::LEAF_BIT;
 use supine_core::forest::rng::{SplitMix64, mix_seed};
 
@@ -81,7 +81,12 @@ fn draw_test(rng: &mut SplitMix64, p: &TreeParams) -> SplitTest {
 
 #[inline]
 fn left(t: &SplitTest, images: &[TrainImage], s: &TrainSample) -> bool {
-    t.goes_left(&images[s.image as usize], s.px.x as i32, s.px.y as i32, s.px.d_mm)
+    t.goes_left(
+        &images[s.image as usize],
+        s.px.x as i32,
+        s.px.y as i32,
+        ProbeScale::new(s.px.d_mm),
+    )
 }
 
 /// Grow a tree on `samples` (reordered in place), reading depth from `images`; `bar` advances by the samples that
@@ -192,13 +197,52 @@ pub fn grow(
 impl Tree {
     /// The local leaf id a sample reaches.
     pub fn descend(&self, img: &TrainImage, x: i32, y: i32, d_mm: u16) -> u32 {
+        let s = ProbeScale::new(d_mm);
         let mut i = 0usize;
         loop {
             let n = &self.nodes[i];
             if n.child & LEAF_BIT != 0 {
                 return n.child & !LEAF_BIT;
             }
-            i = n.child as usize + usize::from(!n.test.goes_left(img, x, y, d_mm));
+            i = n.child as usize + usize::from(!n.test.goes_left(img, x, y, s));
         }
     }
+}
+
+/// The trees of a quantised forest, with leaf ids made local to each tree again (the trainer numbers each tree's
+/// leaves consecutively, after the previous tree's).
+pub fn trees_from_view(view: &supine_core::forest::model::ForestView<'_>) -> anyhow::Result<Vec<Tree>> {
+    use supine_core::forest::model::{ForestModel, Node};
+    let mut out = Vec::new();
+    let mut base = 0u32;
+    for t in 0..view.tree_count() {
+        let mut nodes = Vec::new();
+        let mut leaves = 0u32;
+        let mut stack = vec![0u32];
+        let mut count = 1usize;
+        // Walk the reachable nodes to find the tree's size (children always follow their parent).
+        while let Some(i) = stack.pop() {
+            if let Node::Split { left, .. } = view.node(t, i) {
+                count = count.max(left as usize + 2);
+                stack.push(left);
+                stack.push(left + 1);
+            }
+        }
+        for i in 0..count as u32 {
+            nodes.push(match view.node(t, i) {
+                Node::Leaf(l) => {
+                    anyhow::ensure!(l >= base, "tree {t}: leaf ids are not numbered per tree");
+                    leaves = leaves.max(l - base + 1);
+                    TreeNode {
+                        test: SplitTest::default(),
+                        child: LEAF_BIT | (l - base),
+                    }
+                }
+                Node::Split { test, left } => TreeNode { test, child: left },
+            });
+        }
+        base += leaves;
+        out.push(Tree { nodes, leaves });
+    }
+    Ok(out)
 }
