@@ -48,6 +48,7 @@ pub mod error;
 pub mod fit;
 #[cfg(any(test, feature = "fixtures"))]
 pub mod fixture;
+pub mod forest;
 pub mod geometry;
 pub mod icp;
 pub mod model_file;

@@ -8,6 +8,7 @@ pub mod body;
 pub mod dataset;
 pub mod eval;
 pub mod noise_report;
+pub mod forest;
 pub mod pose;
 pub mod render;
 pub mod scene;

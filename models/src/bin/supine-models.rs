@@ -32,6 +32,8 @@ enum Command {
 
 #[derive(Subcommand)]
 enum TrainCommand {
+    /// The joint forest (paper Sect. 3.3) [default out: models/artifacts/joints.jfor]
+    Joints(supine_models::forest::cli::TrainJointsArgs),
     /// The shape model: canonical-view subspace (randomised SVD) and shape regression forest [default out:
     /// models/artifacts/shape.ssm]
     Shape(supine_models::shape::cli::TrainShapeArgs),
@@ -39,6 +41,8 @@ enum TrainCommand {
 
 #[derive(Subcommand)]
 enum EvalCommand {
+    /// The joint forest: baseline, refined and quantised on the held-out bodies (paper Fig. 6)
+    Joints(supine_models::forest::cli::EvalJointsArgs),
     /// Shape from one frame (subspace, plain fitting, combined; paper Fig. 5) on the held-out bodies
     Shape(supine_models::shape::cli::EvalShapeArgs),
     /// `supine calibrate`'s session on calibration sequences: extrinsic error for 6, 10, 20 poses
@@ -56,6 +60,8 @@ fn main() -> std::process::ExitCode {
         Command::Train(TrainCommand::Shape(a)) => supine_models::shape::cli::run_train(&a),
         Command::Eval(EvalCommand::Shape(a)) => supine_models::shape::cli::run_eval(&a),
         Command::Eval(EvalCommand::Calibration(a)) => return supine_models::eval::calibration::run(&a),
+        Command::Train(TrainCommand::Joints(a)) => supine_models::forest::cli::run_train(&a),
+        Command::Eval(EvalCommand::Joints(a)) => supine_models::forest::cli::run_eval(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

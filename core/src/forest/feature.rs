@@ -1,0 +1,110 @@
+//! Depth-difference features f = d(x + u/d(x)) - d(x + v/d(x)) (Shotton et al. 2011) with offsets `u`, `v` in
+//! pixel·metres (so ±50 means ±50 px at 1 m) and depths in integer millimetres. Off-image and no-depth probes read
+//! [`BACKGROUND_MM`]. Everything is integer, so the trainer and the head computer take the same branch bit for bit.
+//! The division by depth is done once per sample ([`ProbeScale`], 16.16 fixed point); a test then costs four
+//! multiply-shifts and two depth reads.
+
+use crate::depth::DepthFrame;
+
+/// Depth a probe reads off the image or where there is no measurement (Shotton's "large positive constant").
+pub const BACKGROUND_MM: i32 = 10_000;
+/// Largest |offset| component in pixel·metres the model file can store.
+pub const MAX_OFFSET: i32 = 127;
+
+/// One split test: go left when `f(u, v) < threshold_mm`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub struct SplitTest {
+    /// First probe offset (x, y), pixel·metres.
+    pub u: [i8; 2],
+    /// Second probe offset (x, y), pixel·metres.
+    pub v: [i8; 2],
+    /// Threshold in millimetres.
+    pub threshold_mm: i16,
+}
+
+/// A depth image the features read: millimetres, 0 = no depth, anything outside reads 0.
+pub trait DepthImage {
+    /// Depth at pixel (x, y) in mm, 0 outside the image or without a measurement.
+    fn depth_at(&self, x: i32, y: i32) -> u16;
+}
+
+impl DepthImage for DepthFrame<'_> {
+    #[inline]
+    fn depth_at(&self, x: i32, y: i32) -> u16 {
+        self.at(x, y).unwrap_or(0)
+    }
+}
+
+/// Depths below this are read as this for scaling offsets (keeps the fixed-point products in i32).
+pub const MIN_SCALE_DEPTH_MM: u16 = 100;
+
+/// A sample's offset scale 1000 / depth in 16.16 fixed point (one division per sample).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeScale(i32);
+
+impl ProbeScale {
+    /// The scale of a sample of depth `d_mm`.
+    #[inline]
+    pub fn new(d_mm: u16) -> Self {
+        let d = d_mm.max(MIN_SCALE_DEPTH_MM) as i32;
+        ProbeScale(((1000 << 16) + d / 2) / d)
+    }
+
+    /// Offset `o` pixel·metres in pixels, rounded (halves up).
+    #[inline]
+    pub fn pixels(self, o: i8) -> i32 {
+        (o as i32 * self.0 + (1 << 15)) >> 16
+    }
+}
+
+/// The depth a probe at offset `off` from pixel (x, y) with scale `s` reads.
+#[inline]
+pub fn probe<D: DepthImage + ?Sized>(img: &D, x: i32, y: i32, s: ProbeScale, off: [i8; 2]) -> i32 {
+    match img.depth_at(x + s.pixels(off[0]), y + s.pixels(off[1])) {
+        0 => BACKGROUND_MM,
+        z => z as i32,
+    }
+}
+
+impl SplitTest {
+    /// The feature value at pixel (x, y) with offset scale `s`, millimetres.
+    #[inline]
+    pub fn feature<D: DepthImage + ?Sized>(&self, img: &D, x: i32, y: i32, s: ProbeScale) -> i32 {
+        probe(img, x, y, s, self.u) - probe(img, x, y, s, self.v)
+    }
+
+    /// Whether the sample goes to the left child.
+    #[inline]
+    pub fn goes_left<D: DepthImage + ?Sized>(&self, img: &D, x: i32, y: i32, s: ProbeScale) -> bool {
+        self.feature(img, x, y, s) < self.threshold_mm as i32
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::time::Timestamp;
+
+    #[test]
+    fn offsets_scale_with_depth_and_background_reads_large() {
+        let mut buf = [0u16; 100 * 10];
+        for (i, d) in buf.iter_mut().enumerate() {
+            *d = 1000 + (i % 100) as u16;
+        }
+        let f = DepthFrame::new(&buf, 100, 10, Timestamp::default(), 0).unwrap();
+        // At 2 m an offset of 40 px·m moves 20 px.
+        let s2 = ProbeScale::new(2000);
+        assert_eq!(probe(&f, 10, 5, s2, [40, 0]), 1030);
+        assert_eq!(probe(&f, 10, 5, s2, [-40, 0]), BACKGROUND_MM);
+        assert_eq!(ProbeScale::new(1500).pixels(50), 33);
+        assert_eq!(ProbeScale::new(1500).pixels(-50), -33);
+        assert_eq!(ProbeScale::new(1).pixels(127), 1270);
+        let t = SplitTest {
+            u: [20, 0],
+            v: [0, 0],
+            threshold_mm: 10,
+        };
+        assert_eq!(t.feature(&f, 50, 5, ProbeScale::new(1000)), 20);
+        assert!(!t.goes_left(&f, 50, 5, ProbeScale::new(1000)));
+    }
+}

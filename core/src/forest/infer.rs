@@ -1,0 +1,246 @@
+//! One frame's joint estimate: sample kept pixels, descend every tree, turn the reached leaves into votes
+//! (Eq. 5: sample position plus the summed refined leaf weights, weighted by Eq. 6's summed confidences; or the
+//! baseline's per-tree modes), and run the weighted mean-shift per point with its optional prior.
+//! All working memory is the caller's [`Workspace`]; nothing allocates. Deterministic for a seed.
+//! Cost: samples x trees x depth node tests, then per point one vote pass and one mean-shift.
+
+use crate::camera::Intrinsics;
+use crate::forest::feature::{DepthImage, ProbeScale};
+use crate::forest::meanshift::{Prior, Vote, mean_shift};
+use crate::forest::model::{ForestModel, Node};
+use crate::forest::sample::{Clip, SamplePixel, sample_pixels};
+use crate::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES, MODES};
+use crate::geometry::Point3;
+use crate::salient::SalientPoint;
+
+const P: usize = SalientPoint::COUNT;
+
+/// Which leaves vote.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Method {
+    /// Girshick et al. 2011: per tree, up to two modes per leaf, vote length threshold.
+    Baseline,
+    /// The paper's global refinement: one summed vote per sample (Eq. 5) with Eq. 6 weights.
+    Refined,
+}
+
+/// One point's estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PointEstimate {
+    /// Position, camera frame, metres.
+    pub position: Point3,
+    /// Share of the vote weight (prior included) within the kernel at the mode, 0..1.
+    pub confidence: f32,
+}
+
+/// Working memory of one inference (about 150 KiB; keep one per tracker, e.g. in a static or a box).
+pub struct Workspace {
+    samples: [SamplePixel; MAX_SAMPLES],
+    leaves: [[u32; MAX_TREES]; MAX_SAMPLES],
+    votes: [Vote; MAX_VOTES],
+}
+
+impl Default for Workspace {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Workspace {
+    /// Zeroed working memory.
+    pub const fn new() -> Self {
+        Workspace {
+            samples: [SamplePixel {
+                x: 0,
+                y: 0,
+                d_mm: 0,
+                p: [0.0; 3],
+            }; MAX_SAMPLES],
+            leaves: [[0; MAX_TREES]; MAX_SAMPLES],
+            votes: [Vote { p: [0.0; 3], w: 0.0 }; MAX_VOTES],
+        }
+    }
+
+    /// The samples of the last inference.
+    pub fn samples(&self, n: usize) -> &[SamplePixel] {
+        &self.samples[..n.min(MAX_SAMPLES)]
+    }
+}
+
+/// Options of one inference.
+#[derive(Clone, Copy, Debug)]
+pub struct InferConfig {
+    /// Samples to draw (at most [`MAX_SAMPLES`]).
+    pub samples: usize,
+    /// Seed of the pixel sampling.
+    pub seed: u64,
+    /// Which leaves vote.
+    pub method: Method,
+}
+
+/// The leaf tree `tree` of `model` gives the sample at (x, y) of depth `d_mm`.
+#[inline]
+pub fn descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    tree: usize,
+    img: &D,
+    x: i32,
+    y: i32,
+    d_mm: u16,
+) -> u32 {
+    let s = ProbeScale::new(d_mm);
+    let mut i = 0u32;
+    loop {
+        match model.node(tree, i) {
+            Node::Leaf(l) => return l,
+            Node::Split { test, left } => {
+                i = if test.goes_left(img, x, y, s) {
+                    left
+                } else {
+                    left + 1
+                };
+            }
+        }
+    }
+}
+
+/// Votes for `point` from samples at `positions` that reached `leaves` (one row per sample, the first
+/// `model.tree_count()` entries used), weighted by `prior`; returns how many votes were written to `votes`.
+pub fn collect_votes<M: ForestModel + ?Sized>(
+    model: &M,
+    method: Method,
+    point: usize,
+    positions: impl Iterator<Item = [f32; 3]>,
+    leaves: &[[u32; MAX_TREES]],
+    prior: Option<&Prior>,
+    votes: &mut [Vote],
+) -> usize {
+    let trees = model.tree_count();
+    let params = model.params(point);
+    let max_len2 = params.vote_length_m * params.vote_length_m;
+    let mut n = 0;
+    let mut push = |p: [f32; 3], w: f32, n: &mut usize| {
+        if w <= 0.0 || *n >= votes.len() {
+            return;
+        }
+        let w = match prior {
+            Some(pr) => w * pr.weight(&p),
+            None => w,
+        };
+        if w > 0.0 {
+            votes[*n] = Vote { p, w };
+            *n += 1;
+        }
+    };
+    for (p, row) in positions.zip(leaves) {
+        match method {
+            Method::Refined => {
+                let mut o = [0.0f32; 3];
+                let mut w = 0.0f32;
+                for &l in &row[..trees] {
+                    let v = model.refined(l, point);
+                    for a in 0..3 {
+                        o[a] += v.offset[a];
+                    }
+                    w += v.weight;
+                }
+                push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w, &mut n);
+            }
+            Method::Baseline => {
+                for &l in &row[..trees] {
+                    for m in 0..MODES {
+                        let v = model.baseline(l, point, m);
+                        let o = v.offset;
+                        if o[0] * o[0] + o[1] * o[1] + o[2] * o[2] > max_len2 {
+                            continue;
+                        }
+                        // Girshick et al. weight votes by depth squared (the pixel's world area).
+                        let w = v.weight * p[2] * p[2];
+                        push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w, &mut n);
+                    }
+                }
+            }
+        }
+    }
+    n
+}
+
+/// Mean-shift of every point from samples whose leaves are known (`leaves[i]` for `positions[i]`).
+pub fn estimate_from_leaves<M: ForestModel + ?Sized>(
+    model: &M,
+    method: Method,
+    positions: &[[f32; 3]],
+    leaves: &[[u32; MAX_TREES]],
+    priors: &[Option<Prior>; P],
+    votes: &mut [Vote],
+) -> [Option<PointEstimate>; P] {
+    let mut out = [None; P];
+    for (point, slot) in out.iter_mut().enumerate() {
+        let prior = priors[point].as_ref();
+        let n = collect_votes(
+            model,
+            method,
+            point,
+            positions.iter().copied(),
+            leaves,
+            prior,
+            votes,
+        );
+        let pp = model.params(point);
+        let h = match method {
+            Method::Refined => pp.refined_bandwidth_m,
+            Method::Baseline => pp.baseline_bandwidth_m,
+        };
+        *slot = mean_shift(&votes[..n], h, prior.map(|p| p.mean)).map(|m| PointEstimate {
+            position: Point3::from(m.p),
+            confidence: m.confidence,
+        });
+    }
+    out
+}
+
+/// One frame: sample `cfg.samples` kept pixels of `img` (clip `clip`, intrinsics `k`), descend the trees, vote and
+/// mean-shift each point (with `priors[point]` where given). A point without any vote is `None`.
+pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    img: &D,
+    k: &Intrinsics,
+    clip: &Clip<'_>,
+    cfg: &InferConfig,
+    priors: &[Option<Prior>; P],
+    ws: &mut Workspace,
+) -> [Option<PointEstimate>; P] {
+    let want = cfg.samples.min(MAX_SAMPLES);
+    let n = sample_pixels(img, k, clip, cfg.seed, &mut ws.samples[..want]);
+    let trees = model.tree_count().min(MAX_TREES);
+    for i in 0..n {
+        let s = ws.samples[i];
+        for t in 0..trees {
+            ws.leaves[i][t] = descend(model, t, img, s.x as i32, s.y as i32, s.d_mm);
+        }
+    }
+    let mut out = [None; P];
+    let (samples, leaves, votes) = (&ws.samples[..n], &ws.leaves[..n], &mut ws.votes[..]);
+    for (point, slot) in out.iter_mut().enumerate() {
+        let prior = priors[point].as_ref();
+        let c = collect_votes(
+            model,
+            cfg.method,
+            point,
+            samples.iter().map(|s| s.p),
+            leaves,
+            prior,
+            votes,
+        );
+        let pp = model.params(point);
+        let h = match cfg.method {
+            Method::Refined => pp.refined_bandwidth_m,
+            Method::Baseline => pp.baseline_bandwidth_m,
+        };
+        *slot = mean_shift(&votes[..c], h, prior.map(|p| p.mean)).map(|m| PointEstimate {
+            position: Point3::from(m.p),
+            confidence: m.confidence,
+        });
+    }
+    out
+}

@@ -1,0 +1,203 @@
+//! The joint forest end to end on a tiny generated dataset (mannequin bodies, seconds): training is deterministic
+//! (same seed, same bytes at 1 and 2 threads), the written file validates and its float sidecar matches it, the
+//! quantised forest agrees with the float forest on fixed images, and the evaluation reports every method.
+
+use std::path::PathBuf;
+use std::sync::OnceLock;
+use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::model::{ForestModel, ForestView};
+
+use supine_core::salient::SalientPoint;
+use supine_core::time::Timestamp;
+use supine_models::dataset::{Dataset, DatasetConfig, generate};
+use supine_models::forest::data::{clip_for, view_planes};
+use supine_models::forest::eval::{Candidate, evaluate};
+use supine_models::forest::refine::RefineParams;
+use supine_models::forest::sidecar::{self, FloatLeaves};
+use supine_models::forest::train::{TrainConfig, train};
+use supine_models::forest::tree::TreeParams;
+use supine_models::render::noise::KinectNoise;
+use supine_models::scene::body::Mannequin;
+
+fn dataset() -> &'static PathBuf {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let dir = std::env::temp_dir().join(format!("supine-forest-test-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let cfg = DatasetConfig {
+            bodies: 6,
+            views: 2,
+            seed: 3,
+            occluder_fraction: 0.5,
+            train_fraction: 0.7,
+            previews: 0,
+            noise: KinectNoise::default(),
+            view_distance_scale: 1.0,
+        };
+        generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
+        dir
+    })
+}
+
+fn tiny() -> TrainConfig {
+    TrainConfig {
+        seed: 11,
+        trees: 2,
+        samples_per_image: 256,
+        tree: TreeParams {
+            max_depth: 10,
+            candidates: 24,
+            min_split: 20,
+            ..TreeParams::default()
+        },
+        tree_images: 6,
+        validation_fraction: 0.25,
+        refine: RefineParams {
+            epochs: 4,
+            ..RefineParams::default()
+        },
+        ..TrainConfig::default()
+    }
+}
+
+fn train_bytes(threads: usize) -> (Vec<u8>, Vec<u8>) {
+    let ds = Dataset::open(dataset()).unwrap();
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    let (forest, summary) = pool.install(|| train(&ds, &tiny(), false)).unwrap();
+    assert!(summary.validation_images > 0 && summary.fit_images > 0);
+    let bytes = forest.to_file_bytes("{}").unwrap();
+    let crc = ForestView::parse(&bytes).unwrap().file().crc();
+    let side = sidecar::to_bytes(&forest, crc).unwrap();
+    (bytes, side)
+}
+
+fn trained() -> &'static (Vec<u8>, Vec<u8>) {
+    static F: OnceLock<(Vec<u8>, Vec<u8>)> = OnceLock::new();
+    F.get_or_init(|| train_bytes(1))
+}
+
+#[test]
+fn training_is_deterministic_across_thread_counts() {
+    let (a, sa) = trained();
+    let (b, sb) = train_bytes(2);
+    assert_eq!(a, &b, "same seed, same forest bytes at 1 and 2 threads");
+    assert_eq!(sa, &sb, "same float leaves");
+    let v = ForestView::parse(a).unwrap();
+    assert_eq!(v.tree_count(), 2);
+    assert!(v.node_count() > 20, "trees grew: {} nodes", v.node_count());
+}
+
+#[test]
+fn sidecar_is_tied_to_its_forest() {
+    let (a, side) = trained();
+    let v = ForestView::parse(a).unwrap();
+    assert!(FloatLeaves::parse(v, side).is_ok());
+    // A sidecar written for another forest file (another CRC) is refused.
+    let (forest, _) = train(&Dataset::open(dataset()).unwrap(), &tiny(), false).unwrap();
+    let stale = sidecar::to_bytes(&forest, v.file().crc() ^ 1).unwrap();
+    let e = FloatLeaves::parse(v, &stale)
+        .err()
+        .expect("stale sidecar refused");
+    assert!(e.to_string().contains("another forest"), "{e}");
+    let mut short = a.clone();
+    short.truncate(a.len() - 16);
+    assert!(
+        ForestView::parse(&short).is_err(),
+        "a truncated forest is rejected"
+    );
+    let mut side2 = side.clone();
+    let n = side2.len();
+    side2[n - 1] ^= 1;
+    assert!(
+        FloatLeaves::parse(v, &side2).is_err(),
+        "a corrupted sidecar is rejected"
+    );
+}
+
+#[test]
+fn quantised_agrees_with_float_on_fixed_images() {
+    let (a, side) = trained();
+    let v = ForestView::parse(a).unwrap();
+    let fl = FloatLeaves::parse(v, side).unwrap();
+    let ds = Dataset::open(dataset()).unwrap();
+    let k = Intrinsics::KINECT_V1;
+    let mut ws = Box::new(Workspace::new());
+    let mut diffs: Vec<f32> = Vec::new();
+    for &b in &ds.test {
+        let rec = ds.read_body(b).unwrap();
+        for view in &rec.views {
+            let full = view.full_depth(640, 480);
+            let frame = DepthFrame::new(&full, 640, 480, Timestamp::default(), 0).unwrap();
+            let planes = view_planes(&view.truth);
+            let clip = clip_for(&planes, &k);
+            let cfg = InferConfig {
+                samples: 256,
+                seed: 5,
+                method: Method::Refined,
+            };
+            let none = [None; SalientPoint::COUNT];
+            let q = estimate(&v, &frame, &k, &clip, &cfg, &none, &mut ws);
+            let f = estimate(&fl, &frame, &k, &clip, &cfg, &none, &mut ws);
+            let q2 = estimate(&v, &frame, &k, &clip, &cfg, &none, &mut ws);
+            assert_eq!(q, q2, "inference is deterministic for a seed");
+            for p in 0..SalientPoint::COUNT {
+                if let (Some(q), Some(f)) = (q[p], f[p]) {
+                    diffs.push((q.position - f.position).norm());
+                }
+            }
+        }
+    }
+    assert!(diffs.len() >= 20, "{} estimates compared", diffs.len());
+    // Leaf weights are rounded to 1 mm and confidences to 12 % steps: a mode moves by a few mm, but where two modes
+    // of a tiny forest are nearly equal the quantised one may pick the other. Tolerance: the median moves under
+    // 3 mm and at least 70 % of the estimates stay within 1 cm (on this tiny forest about a fifth flip modes;
+    // on the default forest the held-out mean error is unchanged, docs/joint-forest.md).
+    diffs.sort_by(f32::total_cmp);
+    let median = diffs[diffs.len() / 2];
+    let within = diffs.iter().filter(|&&d| d < 0.01).count() as f32 / diffs.len() as f32;
+    assert!(median < 0.003, "median difference {median} m");
+    assert!(within >= 0.7, "only {within} of estimates within 1 cm: {diffs:?}");
+}
+
+#[test]
+fn evaluation_reports_every_method() {
+    let (a, side) = trained();
+    let v = ForestView::parse(a).unwrap();
+    let fl = FloatLeaves::parse(v, side).unwrap();
+    let ds = Dataset::open(dataset()).unwrap();
+    let cands = [
+        Candidate {
+            name: "baseline",
+            model: &fl,
+            method: Method::Baseline,
+        },
+        Candidate {
+            name: "refined",
+            model: &fl,
+            method: Method::Refined,
+        },
+        Candidate {
+            name: "quantised",
+            model: &v,
+            method: Method::Refined,
+        },
+    ];
+    let (table, images) = evaluate(&ds, &cands, 0, 256, false).unwrap();
+    assert_eq!(images, ds.test.len() * 2);
+    let json = supine_models::forest::eval::methods_json(&cands, &table);
+    for m in ["baseline", "refined", "quantised"] {
+        let e = json[m]["mean_error_mm"].as_f64().unwrap();
+        assert!(e.is_finite() && e > 0.0 && e < 1000.0, "{m}: {e}");
+        for p in SalientPoint::ALL {
+            let r = &json[m][p.name()];
+            assert!((0.0..=1.0).contains(&r["detect_3cm"].as_f64().unwrap()));
+            assert!(r["detect_10cm"].as_f64().unwrap() >= r["detect_3cm"].as_f64().unwrap());
+        }
+        assert!(json[m]["with_arm"].is_object() && json[m]["without_arm"].is_object());
+    }
+}

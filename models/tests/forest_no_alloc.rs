@@ -1,0 +1,134 @@
+//! One frame's joint-forest inference never touches the heap: a counting global allocator watches this thread
+//! while a trained forest (tiny, trained here) estimates the six points on generated frames, with and without
+//! priors, for both vote methods, and must see zero allocations.
+// A global allocator is an `unsafe impl` by definition; it only forwards to `System` and counts.
+#![allow(unsafe_code)]
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::meanshift::Prior;
+use supine_core::forest::model::ForestView;
+use supine_core::salient::SalientPoint;
+use supine_core::time::Timestamp;
+use supine_models::dataset::{Dataset, DatasetConfig, generate};
+use supine_models::forest::data::{clip_for, view_planes};
+use supine_models::forest::refine::RefineParams;
+use supine_models::forest::train::{TrainConfig, train};
+use supine_models::forest::tree::TreeParams;
+use supine_models::render::noise::KinectNoise;
+use supine_models::scene::body::Mannequin;
+
+thread_local! {
+    static WATCHING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
+}
+
+struct Counting;
+
+// SAFETY: every call is forwarded unchanged to the system allocator; the counter is a thread-local Cell with a
+// const initialiser, which needs no allocation and no destructor.
+unsafe impl GlobalAlloc for Counting {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.alloc(layout) }
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        // SAFETY: same contract as the caller's.
+        unsafe { System.dealloc(ptr, layout) }
+    }
+
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        count();
+        // SAFETY: same contract as the caller's.
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+}
+
+fn count() {
+    let _ = WATCHING.try_with(|w| {
+        if w.get() {
+            let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
+        }
+    });
+}
+
+#[global_allocator]
+static GLOBAL: Counting = Counting;
+
+#[test]
+fn inference_allocates_nothing() {
+    let dir = std::env::temp_dir().join(format!("supine-forest-noalloc-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    let cfg = DatasetConfig {
+        bodies: 4,
+        views: 2,
+        seed: 9,
+        occluder_fraction: 0.5,
+        train_fraction: 0.75,
+        previews: 0,
+        noise: KinectNoise::default(),
+        view_distance_scale: 1.0,
+    };
+    generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
+    let ds = Dataset::open(&dir).unwrap();
+    let tc = TrainConfig {
+        trees: 3,
+        samples_per_image: 256,
+        tree: TreeParams {
+            max_depth: 8,
+            candidates: 16,
+            min_split: 20,
+            ..TreeParams::default()
+        },
+        validation_fraction: 0.34,
+        refine: RefineParams {
+            epochs: 2,
+            ..RefineParams::default()
+        },
+        ..TrainConfig::default()
+    };
+    let (forest, _) = train(&ds, &tc, false).unwrap();
+    let bytes = forest.to_file_bytes("{}").unwrap();
+    let view = ForestView::parse(&bytes).unwrap();
+    let rec = ds.read_body(ds.test[0]).unwrap();
+    let k = Intrinsics::KINECT_V1;
+    let mut ws = Box::new(Workspace::new());
+    let frames: Vec<(Vec<u16>, _)> = rec
+        .views
+        .iter()
+        .map(|v| (v.full_depth(640, 480), view_planes(&v.truth)))
+        .collect();
+    let prior = Prior {
+        mean: rec.views[0].truth.salient_camera[0],
+        sigma_m: [0.1; 3],
+    };
+    let priors = [Some(prior); SalientPoint::COUNT];
+    let none = [None; SalientPoint::COUNT];
+    let mut found = 0;
+    WATCHING.with(|w| w.set(true));
+    for (depth, planes) in &frames {
+        let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
+        let clip = clip_for(planes, &k);
+        for (seed, method) in [(1, Method::Refined), (2, Method::Baseline)] {
+            let cfg = InferConfig {
+                samples: 512,
+                seed,
+                method,
+            };
+            for pr in [&none, &priors] {
+                let est = estimate(&view, &frame, &k, &clip, &cfg, pr, &mut ws);
+                found += est.iter().flatten().count();
+            }
+        }
+    }
+    WATCHING.with(|w| w.set(false));
+    let n = ALLOCATIONS.with(|a| a.get());
+    assert!(found > 0, "the forest found points");
+    assert_eq!(n, 0, "inference allocated {n} times");
+}
