@@ -3,7 +3,7 @@
 //! reproducible from its seed. Good for sampling and schedules, not for statistics that need a long period.
 
 /// A SplitMix64 state; the seed is the initial state.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct SplitMix64(pub u64);
 
 impl SplitMix64 {
@@ -45,6 +45,17 @@ impl SplitMix64 {
     pub fn nonzero_byte(&mut self) -> u8 {
         (self.below(255) + 1) as u8
     }
+
+    /// A uniform integer in `[lo, hi]`.
+    pub fn range_i32(&mut self, lo: i32, hi: i32) -> i32 {
+        lo + self.below((hi - lo + 1) as usize) as i32
+    }
+}
+
+/// Decorrelates `(seed, index)` into an independent stream seed (the SplitMix64 finaliser): one generator per
+/// image, tree or leaf, whatever the thread that draws from it.
+pub fn mix_seed(seed: u64, index: u64) -> u64 {
+    SplitMix64::new(seed ^ index.wrapping_mul(0xD1B5_4A32_D192_ED03)).next_u64()
 }
 
 #[cfg(test)]
@@ -63,5 +74,9 @@ mod tests {
             assert_ne!(r.nonzero_byte(), 0);
         }
         assert!(!r.chance(0.0));
+        for _ in 0..1000 {
+            assert!((-50..=50).contains(&r.range_i32(-50, 50)));
+        }
+        assert_ne!(mix_seed(1, 0), mix_seed(1, 1));
     }
 }

@@ -94,32 +94,18 @@ fn models_section(dir: &Path) -> (String, Vec<String>) {
     (s, invalid)
 }
 
-/// What a model file is and whether it validates (magic, versions, sizes, checksum), as core would load it; false
-/// only for a supine model file of a known kind that fails to validate.
+/// What a model file is and whether it validates (magic, versions, sizes, checksum), as core would load it.
 fn describe_model(bytes: &[u8]) -> (String, bool) {
-    use supine_core::{body_model, model_file};
-    if bytes.get(..8) != Some(&model_file::MAGIC[..]) {
-        return ("not a supine model file".to_owned(), true);
+    use crate::models::ModelCheck;
+    match crate::models::check(bytes) {
+        ModelCheck::NotAModel => ("not a supine model file".to_owned(), true),
+        ModelCheck::UnknownKind(kind) => (format!("model kind {kind:?}: not known to this build"), true),
+        ModelCheck::Valid { what, .. } => (what, true),
+        ModelCheck::Invalid { kind, error } => (
+            format!("INVALID {} model: {error}", String::from_utf8_lossy(&kind)),
+            false,
+        ),
     }
-    let kind = bytes.get(12..16).unwrap_or_default();
-    if kind == body_model::KIND {
-        return match body_model::BodyModelView::parse(bytes) {
-            Ok(view) => (
-                format!(
-                    "body model v{}, {} vertices, valid",
-                    body_model::FORMAT_VERSION,
-                    view.vertex_count()
-                ),
-                true,
-            ),
-            Err(e) => (format!("INVALID body model: {e}"), false),
-        };
-    }
-    let what = format!(
-        "model kind {:?}: not known to this build",
-        String::from_utf8_lossy(kind)
-    );
-    (what, true)
 }
 
 /// Depth devices visible to each backend of this build.

@@ -12,6 +12,7 @@ mod failure;
 mod info;
 mod links;
 mod model_dirs;
+mod models;
 mod notify;
 mod numbers;
 mod output;

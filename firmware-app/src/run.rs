@@ -1,14 +1,12 @@
 //! `supine run`: the service on the head computer. Today it validates its configuration (`--check-config`): every
-//! key, the source and link strings, and the model files it names (present, readable, and the body model valid as
-//! core loads it). The real-time loop itself lands with the tracker; until then `--config` says so and exits 1.
+//! key, the source and link strings, and the model files it names (present, of the right kind, and valid as core
+//! loads them). The real-time loop itself lands with the tracker; until then `--config` says so and exits 1.
 
 use std::path::PathBuf;
 
-use clap::Args;
-use supine_core::body_model::BodyModelView;
-
 use crate::config;
 use crate::failure::Failure;
+use clap::Args;
 
 /// Arguments of `supine run`.
 #[derive(Args, Debug)]
@@ -42,18 +40,35 @@ pub fn run(args: RunArgs) -> Result<(), Failure> {
 /// Parse the file and check the model files it names; a bad file or model is a usage error (exit 2).
 fn check(path: &std::path::Path) -> Result<config::Checked, Failure> {
     let c = config::load(path).map_err(|e| Failure::usage(e.to_string()))?;
-    for (key, file) in [
-        ("models.body", &c.body_model),
-        ("models.joints", &c.joint_forest),
-        ("models.shape", &c.shape_model),
+    use crate::models::ModelCheck;
+    use supine_core::{body_model, forest, shape};
+    for (key, file, want) in [
+        ("models.body", &c.body_model, body_model::KIND),
+        ("models.joints", &c.joint_forest, forest::model::KIND),
+        ("models.shape", &c.shape_model, shape::KIND),
     ] {
-        let bytes = std::fs::read(file)
-            .map_err(|e| Failure::usage(format!("{}: `{key}` = {}: {e}", path.display(), file.display())))?;
-        if key == "models.body" {
-            BodyModelView::parse(&bytes).map_err(|e| {
-                Failure::usage(format!("{}: `{key}` = {}: {e}", path.display(), file.display()))
-            })?;
+        let bad = |what: String| {
+            Failure::usage(format!(
+                "{}: `{key}` = {}: {what}",
+                path.display(),
+                file.display()
+            ))
+        };
+        let bytes = std::fs::read(file).map_err(|e| bad(e.to_string()))?;
+        let (kind, valid) = match crate::models::check(&bytes) {
+            ModelCheck::Valid { kind, .. } => (kind, Ok(())),
+            ModelCheck::Invalid { kind, error } => (kind, Err(error)),
+            ModelCheck::NotAModel => return Err(bad("not a supine model file".into())),
+            ModelCheck::UnknownKind(k) => return Err(bad(format!("model kind {k:?} unknown to this build"))),
+        };
+        if kind != want {
+            return Err(bad(format!(
+                "a {} model file, {} expected",
+                String::from_utf8_lossy(&kind),
+                String::from_utf8_lossy(&want)
+            )));
         }
+        valid.map_err(bad)?;
     }
     Ok(c)
 }

@@ -1,12 +1,6 @@
 //! One frame's joint-forest inference never touches the heap: a counting global allocator watches this thread
 //! while a trained forest (tiny, trained here) estimates the six points on generated frames, with and without
 //! priors, for both vote methods, and must see zero allocations.
-// A global allocator is an `unsafe impl` by definition; it only forwards to `System` and counts.
-#![allow(unsafe_code)]
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::cell::Cell;
-
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
@@ -21,42 +15,7 @@ use supine_models::forest::train::{TrainConfig, train};
 use supine_models::forest::tree::TreeParams;
 use supine_models::render::noise::KinectNoise;
 use supine_models::scene::body::Mannequin;
-
-thread_local! {
-    static WATCHING: Cell<bool> = const { Cell::new(false) };
-    static ALLOCATIONS: Cell<u64> = const { Cell::new(0) };
-}
-
-struct Counting;
-
-// SAFETY: every call is forwarded unchanged to the system allocator; the counter is a thread-local Cell with a
-// const initialiser, which needs no allocation and no destructor.
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        // SAFETY: same contract as the caller's.
-        unsafe { System.dealloc(ptr, layout) }
-    }
-
-    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
-        count();
-        // SAFETY: same contract as the caller's.
-        unsafe { System.realloc(ptr, layout, new_size) }
-    }
-}
-
-fn count() {
-    let _ = WATCHING.try_with(|w| {
-        if w.get() {
-            let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
-        }
-    });
-}
+use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -111,24 +70,24 @@ fn inference_allocates_nothing() {
     let priors = [Some(prior); SalientPoint::COUNT];
     let none = [None; SalientPoint::COUNT];
     let mut found = 0;
-    WATCHING.with(|w| w.set(true));
-    for (depth, planes) in &frames {
-        let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
-        let clip = clip_for(planes, &k);
-        for (seed, method) in [(1, Method::Refined), (2, Method::Baseline)] {
-            let cfg = InferConfig {
-                samples: 512,
-                seed,
-                method,
-            };
-            for pr in [&none, &priors] {
-                let est = estimate(&view, &frame, &k, &clip, &cfg, pr, &mut ws);
-                found += est.iter().flatten().count();
+    assert!(counter_is_installed());
+    let ((), n) = count_allocations(|| {
+        for (depth, planes) in &frames {
+            let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
+            let clip = clip_for(planes, &k);
+            for (seed, method) in [(1, Method::Refined), (2, Method::Baseline)] {
+                let cfg = InferConfig {
+                    samples: 512,
+                    seed,
+                    method,
+                };
+                for pr in [&none, &priors] {
+                    let est = estimate(&view, &frame, &k, &clip, &cfg, pr, &mut ws);
+                    found += est.iter().flatten().count();
+                }
             }
         }
-    }
-    WATCHING.with(|w| w.set(false));
-    let n = ALLOCATIONS.with(|a| a.get());
+    });
     assert!(found > 0, "the forest found points");
     assert_eq!(n, 0, "inference allocated {n} times");
 }

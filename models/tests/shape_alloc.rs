@@ -1,12 +1,6 @@
 //! The per-frame shape path (canonical view, Eq. 1, forest, alternating ICP + Eq. 7 fit) allocates nothing: a
 //! counting global allocator watches it on real frames of the statistical body model with a tiny trained model.
 
-// A global allocator is an unsafe trait; this test binary is its only user.
-#![allow(unsafe_code)]
-
-use std::alloc::{GlobalAlloc, Layout, System};
-use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
-
 use supine_core::depth::DepthFrame;
 use supine_core::fit::{FitParams, fit_shape, initial_pose};
 use supine_core::icp::IcpParams;
@@ -15,24 +9,7 @@ use supine_core::time::Timestamp;
 use supine_models::body::BodyModel;
 use supine_models::shape::data::{frames_of, intrinsics, small_dataset};
 use supine_models::shape::train::{TrainConfig, train};
-
-struct Counting;
-
-static COUNTING: AtomicBool = AtomicBool::new(false);
-static ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
-
-unsafe impl GlobalAlloc for Counting {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        if COUNTING.load(Ordering::Relaxed) {
-            ALLOCATIONS.fetch_add(1, Ordering::Relaxed);
-        }
-        unsafe { System.alloc(layout) }
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        unsafe { System.dealloc(ptr, layout) }
-    }
-}
+use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
 
 #[global_allocator]
 static GLOBAL: Counting = Counting;
@@ -63,29 +40,29 @@ fn the_shape_path_allocates_nothing_per_frame() {
     let mut points = vec![[0.0f32; 3]; body.counts().subset];
     let mut normals = points.clone();
     let mut fitted = 0;
+    assert!(counter_is_installed());
     for f in &frames {
         let frame = DepthFrame::new(&f.depth, k.width, k.height, Timestamp::default(), 0).unwrap();
         let icp = IcpParams::new(f.mattress);
         let params = FitParams::combined(icp, &[0, 3]);
-        ALLOCATIONS.store(0, Ordering::SeqCst);
-        COUNTING.store(true, Ordering::SeqCst);
-        let est = shape.estimate(&frame, &k, &f.noisy_points, &f.mattress, &mut canonical);
-        let fit = est.ok().and_then(|e| {
-            let pose = initial_pose(&body, &e.shape, &f.noisy_points, &f.mattress.normal()).ok()?;
-            fit_shape(
-                &body,
-                &frame,
-                &k,
-                &e.shape,
-                pose,
-                &params,
-                &mut points,
-                &mut normals,
-            )
-            .ok()
+        let (fit, allocations) = count_allocations(|| {
+            let est = shape.estimate(&frame, &k, &f.noisy_points, &f.mattress, &mut canonical);
+            est.ok().and_then(|e| {
+                let pose = initial_pose(&body, &e.shape, &f.noisy_points, &f.mattress.normal()).ok()?;
+                fit_shape(
+                    &body,
+                    &frame,
+                    &k,
+                    &e.shape,
+                    pose,
+                    &params,
+                    &mut points,
+                    &mut normals,
+                )
+                .ok()
+            })
         });
-        COUNTING.store(false, Ordering::SeqCst);
-        assert_eq!(ALLOCATIONS.load(Ordering::SeqCst), 0, "the shape path allocated");
+        assert_eq!(allocations, 0, "the shape path allocated");
         fitted += fit.is_some() as usize;
     }
     assert!(fitted > 0, "no frame was fitted, so nothing was measured");

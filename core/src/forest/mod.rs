@@ -20,7 +20,6 @@ pub mod feature;
 pub mod infer;
 pub mod meanshift;
 pub mod model;
-pub mod rng;
 pub mod sample;
 
 /// Most trees a forest may have (inference buffers are sized for it).

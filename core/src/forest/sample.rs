@@ -5,8 +5,8 @@
 
 use crate::camera::Intrinsics;
 use crate::forest::feature::DepthImage;
-use crate::forest::rng::SplitMix64;
 use crate::geometry::{Plane, Point3};
+use crate::rng::SplitMix64;
 
 /// Tries per requested sample before sampling gives up (a frame with few kept pixels returns fewer samples).
 pub const MAX_TRIES_PER_SAMPLE: usize = 16;
@@ -87,8 +87,8 @@ pub fn sample_pixels<D: DepthImage + ?Sized>(
     let mut tries = out.len() * MAX_TRIES_PER_SAMPLE;
     while n < out.len() && tries > 0 {
         tries -= 1;
-        let x = r.u0 + rng.below(w) as u16;
-        let y = r.v0 + rng.below(h) as u16;
+        let x = r.u0 + rng.below(w as usize) as u16;
+        let y = r.v0 + rng.below(h as usize) as u16;
         let d = img.depth_at(x as i32, y as i32);
         if let Some(p) = clip.keep(k, x, y, d) {
             out[n] = SamplePixel {

@@ -7,8 +7,8 @@
 use super::data::{CLASS_ARM, ImageInfo, TrainSample};
 use super::float::BaselineLeaf;
 use rayon::prelude::*;
-use supine_core::forest::rng::{SplitMix64, mix_seed};
 use supine_core::forest::{MAX_TREES, MODES};
+use supine_core::rng::{SplitMix64, mix_seed};
 use supine_core::salient::SalientPoint;
 
 const P: usize = SalientPoint::COUNT;
@@ -173,7 +173,7 @@ pub fn leaf_statistics(
                     // A uniform subsample (partial Fisher-Yates), seeded per leaf and point.
                     let mut rng = SplitMix64::new(mix_seed(seed, (l * P + p) as u64));
                     for k in 0..reservoir {
-                        let j = k + rng.below((offs.len() - k) as u32) as usize;
+                        let j = k + rng.below(offs.len() - k);
                         offs.swap(k, j);
                     }
                     offs.truncate(reservoir);

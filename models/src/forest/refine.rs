@@ -14,7 +14,7 @@ use super::data::{ImageInfo, TrainSample};
 use super::leaves::{is_body, offset};
 use indicatif::ProgressBar;
 use supine_core::forest::MAX_TREES;
-use supine_core::forest::rng::{SplitMix64, mix_seed};
+use supine_core::rng::{SplitMix64, mix_seed};
 use supine_core::salient::SalientPoint;
 
 const P: usize = SalientPoint::COUNT;
@@ -109,7 +109,7 @@ pub fn refine(
     for epoch in 0..params.epochs {
         let lr = params.lr * params.lr_decay.powi(epoch as i32);
         for k in (1..order.len()).rev() {
-            order.swap(k, rng.below(k as u32 + 1) as usize);
+            order.swap(k, rng.below(k + 1));
         }
         for &img in &order {
             let (lo, hi) = data.ranges[img];

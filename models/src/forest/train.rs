@@ -20,8 +20,8 @@ use supine_core::camera::Intrinsics;
 use supine_core::forest::infer::{Method, estimate_from_leaves};
 use supine_core::forest::meanshift::Vote;
 use supine_core::forest::model::PointParams;
-use supine_core::forest::rng::{SplitMix64, mix_seed};
 use supine_core::forest::{MAX_TREES, MAX_VOTES};
+use supine_core::rng::{SplitMix64, mix_seed};
 use supine_core::salient::SalientPoint;
 
 const P: usize = SalientPoint::COUNT;
@@ -132,7 +132,7 @@ pub fn split_validation(train: &[u32], fraction: f32, seed: u64) -> (Vec<u32>, V
     let mut ids = train.to_vec();
     let mut rng = SplitMix64::new(mix_seed(seed, 0x0FA1));
     for k in (1..ids.len()).rev() {
-        ids.swap(k, rng.below(k as u32 + 1) as usize);
+        ids.swap(k, rng.below(k + 1));
     }
     let n_val = if ids.len() >= 2 {
         ((ids.len() as f32 * fraction).round() as usize).clamp(1, ids.len() - 1)
@@ -247,7 +247,7 @@ pub fn train_on(
         let mut rng = SplitMix64::new(mix_seed(cfg.seed, 0x7EE0 + t as u64));
         let take = cfg.tree_images.min(n_fit_images);
         for j in 0..take {
-            let r = j + rng.below((n_fit_images - j) as u32) as usize;
+            let r = j + rng.below(n_fit_images - j);
             ids.swap(j, r);
         }
         ids.truncate(take);

@@ -9,7 +9,7 @@ use indicatif::ProgressBar;
 use rayon::prelude::*;
 use supine_core::forest::feature::{ProbeScale, SplitTest};
 use supine_core::forest::model::LEAF_BIT;
-use supine_core::forest::rng::{SplitMix64, mix_seed};
+use supine_core::rng::{SplitMix64, mix_seed};
 
 /// Tree-growing parameters (paper Table 1 as defaults).
 #[derive(Debug, Clone, Copy, serde::Serialize, serde::Deserialize)]
