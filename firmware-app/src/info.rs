@@ -102,7 +102,7 @@ fn describe_model(bytes: &[u8]) -> (String, bool) {
         ModelCheck::UnknownKind(kind) => (format!("model kind {kind:?}: not known to this build"), true),
         ModelCheck::Valid { what, .. } => (what, true),
         ModelCheck::Invalid { kind, error } => (
-            format!("INVALID {} model: {error}", String::from_utf8_lossy(&kind)),
+            format!("INVALID {} model: {error}", crate::models::kind_name(kind)),
             false,
         ),
     }

@@ -28,6 +28,16 @@ pub enum ModelCheck {
     },
 }
 
+/// The name people know a kind by (`body`, `joint forest`, `shape`), or the tag itself.
+pub fn kind_name(kind: Tag) -> String {
+    match kind {
+        body_model::KIND => "body".into(),
+        forest::model::KIND => "joint forest".into(),
+        shape::KIND => "shape".into(),
+        other => String::from_utf8_lossy(&other).into_owned(),
+    }
+}
+
 /// Check `bytes` as core would load them.
 pub fn check(bytes: &[u8]) -> ModelCheck {
     if bytes.get(..8) != Some(&model_file::MAGIC[..]) {

@@ -63,9 +63,9 @@ fn check(path: &std::path::Path) -> Result<config::Checked, Failure> {
         };
         if kind != want {
             return Err(bad(format!(
-                "a {} model file, {} expected",
-                String::from_utf8_lossy(&kind),
-                String::from_utf8_lossy(&want)
+                "a {} model file, a {} model expected",
+                crate::models::kind_name(kind),
+                crate::models::kind_name(want)
             )));
         }
         valid.map_err(bad)?;

@@ -196,10 +196,11 @@ pub fn detect_tip<const N: usize>(
     };
     let pad = lateral_max * k.fx.max(k.fy) / z_near;
     let (w, h) = (frame.width() as f32, frame.height() as f32);
-    let u_lo = (p0.x.min(p1.x) - pad).floor().max(0.0);
-    let u_hi = (p0.x.max(p1.x) + pad).ceil().min(w - 1.0);
-    let v_lo = (p0.y.min(p1.y) - pad).floor().max(0.0);
-    let v_hi = (p0.y.max(p1.y) + pad).ceil().min(h - 1.0);
+    // libm, not the f32 methods: those need std (or a newer core) on some targets.
+    let u_lo = libm::floorf(p0.x.min(p1.x) - pad).max(0.0);
+    let u_hi = libm::ceilf(p0.x.max(p1.x) + pad).min(w - 1.0);
+    let v_lo = libm::floorf(p0.y.min(p1.y) - pad).max(0.0);
+    let v_hi = libm::ceilf(p0.y.max(p1.y) + pad).min(h - 1.0);
     let tip_px = k.project(&t0).ok_or(TipError::OutOfView)?;
     if tip_px.x < 0.0
         || tip_px.y < 0.0
@@ -332,7 +333,8 @@ pub fn detect_tip<const N: usize>(
         tested += 1;
         let Some(px) = k.project(&p) else { continue };
         let r = (shape.max_radius_m + 0.02) * k.fx / p.z.max(0.1);
-        let behind = |du: f32, dv: f32| match frame.at((px.x + du).round() as i32, (px.y + dv).round() as i32)
+        let behind = |du: f32, dv: f32| match frame
+            .at(libm::roundf(px.x + du) as i32, libm::roundf(px.y + dv) as i32)
         {
             Some(0) | None => true,
             Some(d) => d as f32 * 0.001 > p.z + 0.05,

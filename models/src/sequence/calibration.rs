@@ -503,11 +503,12 @@ mod tests {
             "{te} m, {re} deg from {} poses",
             poses.len()
         );
-        // The arm's clock 3 s late: every frame is out of time, no pose comes out.
+        // The arm's clock a minute late (far beyond this 3.2 s sequence, so no frame overlaps a shifted arm state):
+        // every frame is out of time, no pose comes out.
         let late: Vec<_> = arm
             .iter()
             .map(|a| supine_core::calib::ArmSample {
-                time: a.time.offset_by(3_000_000),
+                time: a.time.offset_by(60_000_000),
                 ..*a
             })
             .collect();
