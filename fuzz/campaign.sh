@@ -59,7 +59,10 @@ for t in "${targets[@]}"; do
     t0=$(date +%s)
     status=0
     # The outer timeout only guards against a hung run; libFuzzer stops itself at -runs or -max_total_time.
-    timeout $((max_secs + 300)) nice -n "$niceness" "${fuzz[@]}" run --fuzz-dir fuzz "$t" "fuzz/corpus/$t" -- \
+    # Committed seeds (fuzz/seeds/TARGET, where present) are read as well; new inputs go to the corpus.
+    seeds=()
+    [[ -d fuzz/seeds/$t ]] && seeds=("fuzz/seeds/$t")
+    timeout $((max_secs + 300)) nice -n "$niceness" "${fuzz[@]}" run --fuzz-dir fuzz "$t" "fuzz/corpus/$t" "${seeds[@]}" -- \
         -runs="$runs" -max_total_time="$max_secs" -print_final_stats=1 -close_fd_mask=3 >"$log" 2>&1 || status=$?
     secs=$(($(date +%s) - t0))
     execs=$(grep -o 'stat::number_of_executed_units: *[0-9]*' "$log" | grep -o '[0-9]*$' | tail -1 || true)
