@@ -7,9 +7,24 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
-/// The binary under test.
+/// The binary under test. Under an emulated test run (cross/test: cargo's `CARGO_TARGET_<TRIPLE>_RUNNER`, qemu,
+/// is in the environment) it is started through the same runner, since the kernel cannot execute it directly.
 pub fn supine() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_supine"));
+    let exe = env!("CARGO_BIN_EXE_supine");
+    let runner_var = format!(
+        "CARGO_TARGET_{}_UNKNOWN_LINUX_GNU_RUNNER",
+        std::env::consts::ARCH.to_uppercase()
+    );
+    let runner = std::env::var(runner_var).ok().filter(|r| !r.trim().is_empty());
+    let mut c = match runner {
+        Some(r) => {
+            let mut words = r.split_whitespace();
+            let mut c = Command::new(words.next().unwrap_or_default());
+            c.args(words).arg(exe);
+            c
+        }
+        None => Command::new(exe),
+    };
     c.env_remove("SUPINE_LOG").env_remove("SUPINE_MODELS");
     c
 }
