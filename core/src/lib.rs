@@ -36,8 +36,6 @@
 //! `models/src/eval`).
 #![no_std]
 #![cfg_attr(not(test), deny(clippy::std_instead_of_core))]
-#[cfg(test)]
-extern crate std;
 
 pub mod body_model;
 pub mod calib;
