@@ -146,11 +146,11 @@ pub fn partner(
 /// `normals` (outward model normals, model frame, one per point), points facing away from the camera are skipped:
 /// the camera cannot see them, and their projective partner would be the near surface.
 #[allow(clippy::too_many_arguments)] // the frame, its camera, the model points and the pose are all needed
-pub fn associate(
+pub fn associate<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
     frame: &DepthFrame<'_>,
     k: &Intrinsics,
-    points: &[[f32; 3]],
-    normals: Option<&[[f32; 3]]>,
+    points: &[P],
+    normals: Option<&[N]>,
     stride: usize,
     camera_from_model: &Isometry3,
     params: &IcpParams,
@@ -158,9 +158,9 @@ pub fn associate(
 ) -> Association {
     let mut a = Association::default();
     for (i, q) in points.iter().enumerate().step_by(stride.max(1)) {
-        let p = camera_from_model * Point3::from(*q);
+        let p = camera_from_model * (*q).into();
         if let Some(nm) = normals.and_then(|n| n.get(i))
-            && (camera_from_model.rotation * Vector3::from(*nm)).dot(&p.coords) >= 0.0
+            && (camera_from_model.rotation * (*nm).into()).dot(&p.coords) >= 0.0
         {
             continue;
         }
@@ -180,14 +180,40 @@ pub fn associate(
 
 /// One point-to-plane Gauss-Newton step: the updated `camera_from_model` and the association it was computed from.
 #[allow(clippy::too_many_arguments)] // as `associate`
-pub fn point_to_plane_step(
+pub fn point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
     frame: &DepthFrame<'_>,
     k: &Intrinsics,
-    points: &[[f32; 3]],
-    normals: Option<&[[f32; 3]]>,
+    points: &[P],
+    normals: Option<&[N]>,
     stride: usize,
     camera_from_model: &Isometry3,
     params: &IcpParams,
+) -> Result<(Isometry3, Association), IcpError> {
+    robust_point_to_plane_step(
+        frame,
+        k,
+        points,
+        normals,
+        stride,
+        camera_from_model,
+        params,
+        f32::INFINITY,
+    )
+}
+
+/// [`point_to_plane_step`] with Huber weights: a pair whose point-to-plane residual exceeds `huber_m` counts with
+/// weight `huber_m / |r|` (one IRLS step), so the few wrong pairs at the occluder's rim or a raised hand do not drag
+/// the pose. `f32::INFINITY` gives plain least squares.
+#[allow(clippy::too_many_arguments)] // as `associate`
+pub fn robust_point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    points: &[P],
+    normals: Option<&[N]>,
+    stride: usize,
+    camera_from_model: &Isometry3,
+    params: &IcpParams,
+    huber_m: f32,
 ) -> Result<(Isometry3, Association), IcpError> {
     let mut a = [[0.0f32; 6]; 6];
     let mut b = [0.0f32; 6];
@@ -202,12 +228,17 @@ pub fn point_to_plane_step(
         params,
         |_, p, o, n| {
             let r = n.dot(&(p - o));
+            let w = if libm::fabsf(r) > huber_m {
+                huber_m / libm::fabsf(r)
+            } else {
+                1.0
+            };
             let c = p.coords.cross(n);
             let j = [c.x, c.y, c.z, n.x, n.y, n.z];
             for x in 0..6 {
-                b[x] -= j[x] * r;
+                b[x] -= w * j[x] * r;
                 for y in 0..=x {
-                    a[x][y] += j[x] * j[y];
+                    a[x][y] += w * j[x] * j[y];
                 }
             }
         },

@@ -58,4 +58,5 @@ pub mod shape;
 pub mod spd;
 pub mod time;
 pub mod torso;
+pub mod tracker;
 pub mod wire;

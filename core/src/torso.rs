@@ -114,6 +114,27 @@ impl<'a> TorsoSurface<'a> {
         })
     }
 
+    /// The surface over buffers a [`TorsoSurface::build`] filled earlier (a tracker keeps the buffers and takes
+    /// this view per frame); `None` when the slices' lengths differ.
+    pub fn from_parts(
+        view: &BodyModelView<'a>,
+        vertices: &'a [Point3],
+        normals: &'a [Vector3],
+        regions: &'a [BodyRegion],
+        body_from_torso: Isometry3,
+    ) -> Option<Self> {
+        (vertices.len() == view.counts().subset
+            && normals.len() == vertices.len()
+            && regions.len() == vertices.len())
+        .then(|| TorsoSurface {
+            vertices,
+            normals,
+            regions,
+            triangles: view.torso_subset_triangles(),
+            body_from_torso,
+        })
+    }
+
     /// Vertex positions, `torso` frame.
     pub fn vertices(&self) -> &'a [Point3] {
         self.vertices

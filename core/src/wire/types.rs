@@ -243,6 +243,10 @@ wire_enum! {
         Degraded = 4 => "degraded",
         /// The depth sensor stopped delivering frames or delivers unusable ones.
         SensorFault = 5 => "sensor_fault",
+        /// Init done (bed and shape known), looking for the patient's torso for the first time; no pose yet.
+        Acquiring = 6 => "acquiring",
+        /// After a loss, looking for the torso again from the forest alone; no pose yet.
+        Reacquiring = 7 => "reacquiring",
     }
 }
 
@@ -328,7 +332,7 @@ mod tests {
         for &r in BodyRegion::ALL {
             assert_eq!(BodyRegion::from_u8(u8::from(r)), Some(r));
         }
-        assert_eq!(TrackerState::from_u8(6), None);
+        assert_eq!(TrackerState::from_u8(8), None);
         assert_eq!(BodyRegion::from_u8(10), None);
         assert_eq!(ShapeMode::from_u8(3), None);
         assert_eq!(TrackerState::SensorFault.name(), "sensor_fault");

@@ -47,6 +47,8 @@ enum EvalCommand {
     Shape(supine_models::shape::cli::EvalShapeArgs),
     /// `supine calibrate`'s session on calibration sequences: extrinsic error for 6, 10, 20 poses
     Calibration(supine_models::eval::calibration::CalibrationEvalArgs),
+    /// Run the tracker over generated sequences and score it against the truth (three variants)
+    Tracking(supine_models::eval::tracking::TrackingEvalArgs),
 }
 
 fn main() -> std::process::ExitCode {
@@ -60,6 +62,7 @@ fn main() -> std::process::ExitCode {
         Command::Train(TrainCommand::Shape(a)) => supine_models::shape::cli::run_train(&a),
         Command::Eval(EvalCommand::Shape(a)) => supine_models::shape::cli::run_eval(&a),
         Command::Eval(EvalCommand::Calibration(a)) => return supine_models::eval::calibration::run(&a),
+        Command::Eval(EvalCommand::Tracking(a)) => return supine_models::eval::tracking::run(&a),
         Command::Train(TrainCommand::Joints(a)) => supine_models::forest::cli::run_train(&a),
         Command::Eval(EvalCommand::Joints(a)) => supine_models::forest::cli::run_eval(&a),
     };

@@ -3,3 +3,5 @@
 
 pub mod calibration;
 pub mod figure;
+pub mod tracking;
+pub mod tracking_plot;

@@ -16,7 +16,8 @@ pub struct Panel {
     pub decimals: usize,
 }
 
-const COLORS: [[u8; 3]; 4] = [[200, 90, 60], [60, 120, 200], [90, 170, 90], [150, 90, 170]];
+/// Series colours, in order.
+pub const COLORS: [[u8; 3]; 4] = [[200, 90, 60], [60, 120, 200], [90, 170, 90], [150, 90, 170]];
 
 fn glyph(c: char) -> [u8; 7] {
     match c.to_ascii_uppercase() {
@@ -69,14 +70,35 @@ fn glyph(c: char) -> [u8; 7] {
     }
 }
 
-struct Canvas {
+/// An RGB raster with filled rectangles and the built-in font (shared by the evaluation charts).
+pub struct Canvas {
     w: usize,
     h: usize,
     px: Vec<u8>,
 }
 
 impl Canvas {
-    fn rect(&mut self, x0: usize, y0: usize, x1: usize, y1: usize, c: [u8; 3]) {
+    /// A white `w` x `h` canvas.
+    pub fn new(w: usize, h: usize) -> Self {
+        Canvas {
+            w,
+            h,
+            px: vec![255; w * h * 3],
+        }
+    }
+
+    /// Write the canvas as an RGB PNG.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
+        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), self.w as u32, self.h as u32);
+        enc.set_color(png::ColorType::Rgb);
+        enc.set_depth(png::BitDepth::Eight);
+        enc.write_header()?.write_image_data(&self.px)?;
+        Ok(())
+    }
+
+    /// Fill `[x0, x1) x [y0, y1)` with colour `c` (clipped to the canvas).
+    pub fn rect(&mut self, x0: usize, y0: usize, x1: usize, y1: usize, c: [u8; 3]) {
         for y in y0.min(self.h)..y1.min(self.h) {
             for x in x0.min(self.w)..x1.min(self.w) {
                 self.px[(y * self.w + x) * 3..(y * self.w + x) * 3 + 3].copy_from_slice(&c);
@@ -85,7 +107,7 @@ impl Canvas {
     }
 
     /// Text at (x, y) top-left, `s` pixels per font pixel.
-    fn text(&mut self, x: usize, y: usize, t: &str, s: usize, c: [u8; 3]) {
+    pub fn text(&mut self, x: usize, y: usize, t: &str, s: usize, c: [u8; 3]) {
         for (i, ch) in t.chars().enumerate() {
             let g = glyph(ch);
             for (r, bits) in g.iter().enumerate() {
@@ -102,7 +124,7 @@ impl Canvas {
 }
 
 /// Width in pixels of `t` at scale `s`.
-fn text_w(t: &str, s: usize) -> usize {
+pub fn text_w(t: &str, s: usize) -> usize {
     t.chars().count() * 6 * s
 }
 
@@ -111,11 +133,7 @@ pub fn bar_chart(path: &Path, title: &str, series: &[&str], panels: &[Panel]) ->
     let (pw, ph) = (640usize, 420usize);
     let top = 60;
     let (w, h) = (pw * panels.len().max(1), ph + top + 40);
-    let mut c = Canvas {
-        w,
-        h,
-        px: vec![255; w * h * 3],
-    };
+    let mut c = Canvas::new(w, h);
     c.text(20, 12, title, 2, [0, 0, 0]);
     let mut lx = 20;
     for (i, s) in series.iter().enumerate() {
@@ -160,10 +178,5 @@ pub fn bar_chart(path: &Path, title: &str, series: &[&str], panels: &[Panel]) ->
             );
         }
     }
-    let file = std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?;
-    let mut enc = png::Encoder::new(std::io::BufWriter::new(file), w as u32, h as u32);
-    enc.set_color(png::ColorType::Rgb);
-    enc.set_depth(png::BitDepth::Eight);
-    enc.write_header()?.write_image_data(&c.px)?;
-    Ok(())
+    c.save(path)
 }

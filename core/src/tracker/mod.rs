@@ -1,0 +1,919 @@
+//! The real-time tracker (paper Fig. 1) as one allocation-free loop: `Tracker::process(frame, arm, clock)`.
+//!
+//! Init phase (state `initialising`, first frames with the patient still): the bed's planes and volume of interest
+//! ([`crate::planes`]) from the first frame; then the joint forest's points and the subspace shape estimate on each
+//! of `shape_frames` frames, averaged; then one refinement by model fitting ([`crate::fit`], Eq. 7) unless the
+//! budget forbids it; then the shaped torso model ([`crate::torso`]) built once into the caller's buffers.
+//!
+//! Per frame after init: the forest's six points (with a Gaussian prior around the last refined points in the
+//! feedback variant, paper Sect. 3.4) give the torso frame; rigid point-to-plane ICP of the torso model refines it
+//! ([`torso_icp`]: robust, occluder-aware, a fixed iteration count cut by the [`budget`]); the refined pose and
+//! points feed the next frame's prior; probe mapping ([`crate::probe`]) maps the newest arm state onto the surface;
+//! the [`state`] machine decides what the health message says; packets are stamped with the frame's capture time.
+//!
+//! Three variants share the loop, for the evaluation of the paper's claim: [`Variant::Forest`] (the forest's points
+//! alone give the pose), [`Variant::ForestIcp`] (ICP from the forest each frame, no prior), and
+//! [`Variant::ForestIcpFeedback`] (the product).
+//!
+//! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
+//! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
+//! (20-40 µs each), probe mapping (tens of µs) and five packets.
+
+pub mod budget;
+pub mod state;
+pub mod torso_icp;
+
+use crate::body_model::{BodyModelView, SHAPE_COMPONENTS};
+pub use crate::calib::ArmSample;
+use crate::calib::solve::{Pair, kabsch};
+use crate::camera::Intrinsics;
+use crate::depth::DepthFrame;
+use crate::fit::{self, FitParams};
+use crate::forest::infer::{self, InferConfig, Method, PointEstimate, Workspace};
+use crate::forest::meanshift::Prior;
+use crate::forest::model::ForestView;
+use crate::forest::sample::{Clip, PixelRect};
+use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
+use crate::planes::{self, BedScene, PlaneConfig};
+use crate::probe::{self, ProbeMapping};
+use crate::rng::mix_seed;
+use crate::salient::SalientPoint;
+use crate::shape::ShapeModelView;
+use crate::time::{Clock, Timestamp};
+use crate::torso::{self, TorsoBuffers, TorsoSurface};
+use crate::wire::{
+    self, BodyRegion, BodyShape, Confidence, Health, Message, SalientPointReport, SalientPoints, TorsoPose,
+    TrackerState, UnitQuatQ14,
+};
+use budget::{BudgetConfig, BudgetCounters, Stage, StageTimes, Stopwatch};
+use state::{FitQuality, StateLimits, StateMachine};
+use torso_icp::{TorsoFit, TorsoIcpConfig};
+
+const P: usize = SalientPoint::COUNT;
+
+/// Which parts of the loop run (the evaluation compares them; the product is [`Variant::ForestIcpFeedback`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Variant {
+    /// The forest's points alone give the torso pose.
+    Forest,
+    /// ICP refines the forest's pose every frame; no prior.
+    ForestIcp,
+    /// ICP refines, and the refined points are the next frame's forest prior.
+    ForestIcpFeedback,
+}
+
+impl Variant {
+    /// Every variant.
+    pub const ALL: [Variant; 3] = [Variant::Forest, Variant::ForestIcp, Variant::ForestIcpFeedback];
+
+    /// Name used in reports (`forest`, `forest_icp`, `forest_icp_feedback`).
+    pub const fn name(self) -> &'static str {
+        match self {
+            Variant::Forest => "forest",
+            Variant::ForestIcp => "forest_icp",
+            Variant::ForestIcpFeedback => "forest_icp_feedback",
+        }
+    }
+}
+
+/// Tracker settings.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TrackerConfig {
+    /// Which parts of the loop run.
+    pub variant: Variant,
+    /// Frame budget and ICP iteration count.
+    pub budget: BudgetConfig,
+    /// Frames whose shape estimates are averaged in the init phase.
+    pub shape_frames: u16,
+    /// Whether the init phase refines the shape by model fitting.
+    pub refine_shape: bool,
+    /// A shape known beforehand (σ units; a frozen shape kept over a re-initialise, or a diagnostic): the init
+    /// phase then finds only the bed.
+    pub known_shape: Option<[f32; SHAPE_COMPONENTS]>,
+    /// Shape coefficients that carry the torso (Eq. 7's weak prior on them; the rest are held near the estimate).
+    pub torso_coeffs: [bool; SHAPE_COMPONENTS],
+    /// Bed-plane search.
+    pub planes: PlaneConfig,
+    /// Up in the camera frame when known (from the calibration), for the bed search.
+    pub up_camera: Option<Vector3>,
+    /// Forest samples per frame (0: the model's own).
+    pub forest_samples: u16,
+    /// Standard deviation of the feedback prior per axis, metres.
+    pub prior_sigma_m: f32,
+    /// Torso ICP.
+    pub icp: TorsoIcpConfig,
+    /// State transitions.
+    pub limits: StateLimits,
+    /// The calibration: where the camera sits in `robot_base`.
+    pub robot_base_from_camera: Isometry3,
+    /// A body-shape packet is sent on change and every this many frames (150 = 5 s at 30 Hz).
+    pub shape_every_frames: u32,
+    /// Seed of the forest's pixel sampling and the RANSAC (mixed with the frame count: replays are identical).
+    pub seed: u64,
+}
+
+impl Default for TrackerConfig {
+    fn default() -> Self {
+        let mut torso_coeffs = [false; SHAPE_COMPONENTS];
+        torso_coeffs[0] = true;
+        torso_coeffs[3] = true;
+        TrackerConfig {
+            variant: Variant::ForestIcpFeedback,
+            budget: BudgetConfig::default(),
+            shape_frames: 10,
+            refine_shape: true,
+            known_shape: None,
+            torso_coeffs,
+            planes: PlaneConfig::default(),
+            up_camera: None,
+            forest_samples: 0,
+            prior_sigma_m: 0.05,
+            icp: TorsoIcpConfig::default(),
+            limits: StateLimits::default(),
+            robot_base_from_camera: Isometry3::identity(),
+            shape_every_frames: 150,
+            seed: 0x7EAC_4E55,
+        }
+    }
+}
+
+/// The models the tracker reads: borrowed views validated once.
+#[derive(Clone, Copy)]
+pub struct Models<'m> {
+    /// The statistical body model.
+    pub body: BodyModelView<'m>,
+    /// The joint forest.
+    pub joints: ForestView<'m>,
+    /// The shape model (subspace and regression forest).
+    pub shape: ShapeModelView<'m>,
+}
+
+/// How long each scratch buffer must be.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct ScratchSizes {
+    /// `plane_points` and `plane_labels`.
+    pub plane_points: usize,
+    /// `canonical`.
+    pub canonical: usize,
+    /// `fit_points`, `fit_normals` and the three torso buffers (the body model's torso subset).
+    pub torso: usize,
+}
+
+impl ScratchSizes {
+    /// The sizes for `models`, frames of `k`'s size and the plane search's stride.
+    pub fn of(models: &Models<'_>, k: &Intrinsics, planes: &PlaneConfig) -> Self {
+        ScratchSizes {
+            plane_points: planes::scratch_points(
+                k.width as usize,
+                k.height as usize,
+                planes.stride.max(1) as usize,
+            ),
+            canonical: models.shape.pixels(),
+            torso: models.body.counts().subset,
+        }
+    }
+}
+
+/// The caller's working memory (allocated once, before the first frame).
+pub struct Scratch<'s> {
+    /// Bed search points.
+    pub plane_points: &'s mut [Point3],
+    /// Bed search labels.
+    pub plane_labels: &'s mut [u8],
+    /// Canonical depth image of the shape estimate.
+    pub canonical: &'s mut [f32],
+    /// Shaped torso subset during the refinement.
+    pub fit_points: &'s mut [[f32; 3]],
+    /// Its normals.
+    pub fit_normals: &'s mut [[f32; 3]],
+    /// The shaped torso model's vertices (torso frame).
+    pub torso_vertices: &'s mut [Point3],
+    /// Its normals.
+    pub torso_normals: &'s mut [Vector3],
+    /// Its body regions.
+    pub torso_regions: &'s mut [BodyRegion],
+    /// The forest's working memory.
+    pub forest: &'s mut Workspace,
+}
+
+/// Why a tracker could not be built.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[non_exhaustive]
+pub enum TrackerError {
+    /// A scratch buffer has the wrong length.
+    Scratch {
+        /// Which buffer.
+        buffer: &'static str,
+        /// Entries needed.
+        expected: usize,
+        /// Entries given.
+        found: usize,
+    },
+}
+
+impl core::fmt::Display for TrackerError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            TrackerError::Scratch {
+                buffer,
+                expected,
+                found,
+            } => write!(
+                f,
+                "tracker scratch `{buffer}` holds {found} entries, {expected} needed"
+            ),
+        }
+    }
+}
+
+impl core::error::Error for TrackerError {}
+
+/// At most this many packets per frame: torso pose, salient points, probe, body shape, health.
+pub const MAX_PACKETS: usize = 5;
+
+/// What one frame produced.
+#[derive(Debug, Clone)]
+pub struct FrameReport {
+    /// The state after this frame (what its health packet says).
+    pub state: TrackerState,
+    /// Per-stage times, µs.
+    pub times: StageTimes,
+    /// The packets to send, in order, stamped with the frame's capture time.
+    pub packets: heapless::Vec<Message, MAX_PACKETS>,
+    /// The refined torso pose when one is reported.
+    pub camera_from_torso: Option<Isometry3>,
+    /// The six salient points (camera frame) when a pose is reported.
+    pub salient_camera: Option<[Point3; P]>,
+    /// The forest's raw points of this frame.
+    pub forest_points: [Option<PointEstimate>; P],
+    /// The torso fit of this frame (default when none ran).
+    pub fit: TorsoFit,
+    /// The probe mapping when an arm state was given and a pose is reported.
+    pub probe: Option<ProbeMapping>,
+    /// Age of the arm state used (frame capture minus arm time), µs.
+    pub arm_age_us: Option<i64>,
+    /// Whether the frame was rejected unprocessed (its size differs from the intrinsics).
+    pub rejected: bool,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Init {
+    bed: Option<BedScene>,
+    shape_sum: [f32; SHAPE_COMPONENTS],
+    shape_n: u16,
+}
+
+impl Init {
+    const fn new() -> Self {
+        Init {
+            bed: None,
+            shape_sum: [0.0; SHAPE_COMPONENTS],
+            shape_n: 0,
+        }
+    }
+}
+
+#[derive(Debug, Clone, Copy)]
+struct TorsoModel {
+    bed: BedScene,
+    body_from_torso: Isometry3,
+    salient_torso: [Point3; P],
+    shape: [f32; SHAPE_COMPONENTS],
+}
+
+/// The tracker: models, the caller's scratch, the state machine and the pose carried between frames.
+pub struct Tracker<'m, 's> {
+    models: Models<'m>,
+    k: Intrinsics,
+    cfg: TrackerConfig,
+    scratch: Scratch<'s>,
+    machine: StateMachine,
+    counters: BudgetCounters,
+    init: Init,
+    torso: Option<TorsoModel>,
+    pose: Option<Isometry3>,
+    frames: u32,
+    seq: u16,
+    shape_revision: u8,
+    last_shape_frame: Option<u32>,
+    last_capture: Option<Timestamp>,
+    interval_us: f32,
+}
+
+fn check(buffer: &'static str, expected: usize, found: usize) -> Result<(), TrackerError> {
+    if expected == found {
+        Ok(())
+    } else {
+        Err(TrackerError::Scratch {
+            buffer,
+            expected,
+            found,
+        })
+    }
+}
+
+fn mm(p: &Point3) -> [i32; 3] {
+    [p.x, p.y, p.z].map(|c| libm::roundf(c * 1000.0) as i32)
+}
+
+fn quat_q14(q: &UnitQuaternion) -> UnitQuatQ14 {
+    UnitQuatQ14::from_f32([q.w, q.i, q.j, q.k]).unwrap_or(UnitQuatQ14::IDENTITY)
+}
+
+/// Roll offsets tried when acquiring without a pose, radians.
+const ACQUIRE_ROLLS_RAD: [f32; 2] = [-0.35, 0.35];
+
+fn rank(q: FitQuality) -> u8 {
+    match q {
+        FitQuality::Good => 2,
+        FitQuality::Occluded => 1,
+        FitQuality::Failed => 0,
+    }
+}
+
+/// `camera_from_torso` placing the model's salient points (torso frame) on the forest's (camera frame), weighted by
+/// the forest's confidence (Kabsch); `None` with fewer than three points.
+fn forest_pose(points: &[Option<PointEstimate>; P], model: &[Point3; P]) -> Option<Isometry3> {
+    let mut pairs = [Pair {
+        robot_base: Point3::origin(),
+        camera: Point3::origin(),
+    }; P];
+    let mut w = [0.0f32; P];
+    for i in 0..P {
+        if let Some(e) = points[i] {
+            pairs[i] = Pair {
+                robot_base: e.position,
+                camera: model[i],
+            };
+            w[i] = e.confidence.max(1e-3);
+        }
+    }
+    kabsch(&pairs, |i| w[i])
+}
+
+fn all_points(points: &[Option<PointEstimate>; P]) -> Option<[Point3; P]> {
+    let mut out = [Point3::origin(); P];
+    for (o, p) in out.iter_mut().zip(points) {
+        *o = p.as_ref()?.position;
+    }
+    Some(out)
+}
+
+impl<'m, 's> Tracker<'m, 's> {
+    /// A tracker over `models` for frames of `k`, with the caller's `scratch` (lengths from [`ScratchSizes::of`]).
+    pub fn new(
+        models: Models<'m>,
+        k: Intrinsics,
+        cfg: TrackerConfig,
+        scratch: Scratch<'s>,
+    ) -> Result<Self, TrackerError> {
+        let sizes = ScratchSizes::of(&models, &k, &cfg.planes);
+        check("plane_points", sizes.plane_points, scratch.plane_points.len())?;
+        check("plane_labels", sizes.plane_points, scratch.plane_labels.len())?;
+        check("canonical", sizes.canonical, scratch.canonical.len())?;
+        check("fit_points", sizes.torso, scratch.fit_points.len())?;
+        check("fit_normals", sizes.torso, scratch.fit_normals.len())?;
+        check("torso_vertices", sizes.torso, scratch.torso_vertices.len())?;
+        check("torso_normals", sizes.torso, scratch.torso_normals.len())?;
+        check("torso_regions", sizes.torso, scratch.torso_regions.len())?;
+        Ok(Tracker {
+            models,
+            k,
+            cfg,
+            scratch,
+            machine: StateMachine::new(cfg.limits),
+            counters: BudgetCounters::default(),
+            init: Init::new(),
+            torso: None,
+            pose: None,
+            frames: 0,
+            seq: 0,
+            shape_revision: 0,
+            last_shape_frame: None,
+            last_capture: None,
+            interval_us: 0.0,
+        })
+    }
+
+    /// The settings.
+    pub fn config(&self) -> &TrackerConfig {
+        &self.cfg
+    }
+
+    /// The current state.
+    pub fn state(&self) -> TrackerState {
+        self.machine.state()
+    }
+
+    /// Budget counters (overruns, drops, cuts).
+    pub fn counters(&self) -> BudgetCounters {
+        self.counters
+    }
+
+    /// The bed found by the init phase.
+    pub fn bed(&self) -> Option<&BedScene> {
+        self.torso.as_ref().map(|t| &t.bed).or(self.init.bed.as_ref())
+    }
+
+    /// The estimated shape (σ units) once the init phase is done.
+    pub fn shape(&self) -> Option<&[f32; SHAPE_COMPONENTS]> {
+        self.torso.as_ref().map(|t| &t.shape)
+    }
+
+    /// The shaped torso surface (torso frame) once the init phase is done.
+    pub fn surface(&self) -> Option<TorsoSurface<'_>> {
+        let t = self.torso.as_ref()?;
+        TorsoSurface::from_parts(
+            &self.models.body,
+            self.scratch.torso_vertices,
+            self.scratch.torso_normals,
+            self.scratch.torso_regions,
+            t.body_from_torso,
+        )
+    }
+
+    /// Drop the track and run the init phase again (the re-initialise command).
+    pub fn reinitialise(&mut self) {
+        self.machine.reinitialise();
+        self.init = Init::new();
+        self.torso = None;
+        self.pose = None;
+    }
+
+    /// The source reported a fault; the next usable frame re-acquires.
+    pub fn sensor_fault(&mut self) {
+        self.machine.sensor_fault();
+        self.pose = None;
+    }
+
+    /// The caller dropped `n` frames unprocessed (it only ever hands over the newest).
+    pub fn dropped(&mut self, n: u32) {
+        self.counters.dropped = self.counters.dropped.wrapping_add(n);
+    }
+
+    /// A health packet for the current state (for the caller's own messages: a final one at shutdown, a sensor
+    /// fault between frames).
+    pub fn health(&mut self, time: Timestamp, latency_us: u32) -> Message {
+        let body = wire::Body::Health(Health {
+            state: self.machine.state(),
+            frame_rate_chz: self.frame_rate_chz(),
+            latency_us,
+            budget_overruns: self.counters.overruns,
+            dropped_frames: self.counters.dropped,
+        });
+        self.message(time, body)
+    }
+
+    fn frame_rate_chz(&self) -> u16 {
+        if self.interval_us > 0.0 {
+            (1e8 / self.interval_us).clamp(0.0, u16::MAX as f32) as u16
+        } else {
+            0
+        }
+    }
+
+    fn message(&mut self, time: Timestamp, body: wire::Body) -> Message {
+        let m = Message {
+            seq: self.seq,
+            timestamp: time,
+            body,
+        };
+        self.seq = self.seq.wrapping_add(1);
+        m
+    }
+
+    fn clip_planes(bed: &BedScene) -> [Plane; 2] {
+        [bed.mattress, bed.head_section.unwrap_or(bed.mattress)]
+    }
+
+    fn forest(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        bed: &BedScene,
+        priors: &[Option<Prior>; P],
+    ) -> [Option<PointEstimate>; P] {
+        let planes = Self::clip_planes(bed);
+        let clip = Clip {
+            above: &planes,
+            margin_m: 0.02,
+            region: PixelRect {
+                u0: 0,
+                v0: 0,
+                u1: self.k.width,
+                v1: self.k.height,
+            },
+            max_depth_mm: 4000,
+        };
+        let samples = match self.cfg.forest_samples {
+            0 => self.models.joints.samples_per_frame(),
+            n => n as usize,
+        };
+        let cfg = InferConfig {
+            samples,
+            seed: mix_seed(self.cfg.seed, self.frames as u64),
+            method: Method::Refined,
+        };
+        infer::estimate(
+            &self.models.joints,
+            frame,
+            &self.k,
+            &clip,
+            &cfg,
+            priors,
+            self.scratch.forest,
+        )
+    }
+
+    /// Process one frame: `arm` is the newest arm state, `clock` times the stages (core reads no clock itself).
+    pub fn process(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        arm: Option<&ArmSample>,
+        clock: &(impl Clock + ?Sized),
+    ) -> FrameReport {
+        let mut watch = Stopwatch::start(clock);
+        let mut report = FrameReport {
+            state: self.machine.state(),
+            times: StageTimes::default(),
+            packets: heapless::Vec::new(),
+            camera_from_torso: None,
+            salient_camera: None,
+            forest_points: [None; P],
+            fit: TorsoFit::default(),
+            probe: None,
+            arm_age_us: None,
+            rejected: false,
+        };
+        if frame.width() != self.k.width || frame.height() != self.k.height {
+            report.rejected = true;
+            let h = self.health(frame.capture, watch.elapsed(clock));
+            let _ = report.packets.push(h);
+            return report;
+        }
+        if let Some(last) = self.last_capture {
+            let dt = frame.capture.since(last);
+            if dt > 0 && dt < 1_000_000 {
+                self.interval_us = if self.interval_us > 0.0 {
+                    0.9 * self.interval_us + 0.1 * dt as f32
+                } else {
+                    dt as f32
+                };
+            }
+        }
+        self.last_capture = Some(frame.capture);
+        self.machine.frame_arrived();
+        if self.machine.initialised() {
+            self.track(frame, arm, clock, &mut watch, &mut report);
+        } else {
+            self.initialise(frame, clock, &mut watch, &mut report);
+        }
+        self.frames = self.frames.wrapping_add(1);
+        report.state = self.machine.state();
+        self.packets(frame.capture, &mut report);
+        watch.lap(clock, Stage::Output);
+        report.times = watch.times;
+        if watch.times.total() > self.cfg.budget.frame_us {
+            self.counters.overruns = self.counters.overruns.wrapping_add(1);
+        }
+        // The health packet is last: it carries this frame's latency and counters.
+        let h = self.health(frame.capture, watch.times.total());
+        let _ = report.packets.push(h);
+        report
+    }
+
+    fn initialise(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        clock: &(impl Clock + ?Sized),
+        watch: &mut Stopwatch,
+        report: &mut FrameReport,
+    ) {
+        let bed = match self.init.bed {
+            Some(b) => b,
+            None => {
+                let mut cfg = self.cfg.planes;
+                cfg.seed = mix_seed(cfg.seed ^ self.cfg.seed, self.frames as u64);
+                match planes::estimate_bed(
+                    frame,
+                    &self.k,
+                    &cfg,
+                    self.cfg.up_camera.as_ref(),
+                    self.scratch.plane_points,
+                    self.scratch.plane_labels,
+                ) {
+                    Ok(b) => {
+                        self.init.bed = Some(b);
+                        b
+                    }
+                    Err(_) => {
+                        watch.lap(clock, Stage::Init);
+                        return;
+                    }
+                }
+            }
+        };
+        if let Some(z) = self.cfg.known_shape {
+            self.finish_init(frame, &bed, None, z, clock, watch);
+            watch.lap(clock, Stage::Init);
+            return;
+        }
+        let points = self.forest(frame, &bed, &[None; P]);
+        report.forest_points = points;
+        watch.lap(clock, Stage::Forest);
+        let Some(observed) = all_points(&points) else {
+            return;
+        };
+        if let Ok(e) =
+            self.models
+                .shape
+                .estimate(frame, &self.k, &observed, &bed.mattress, self.scratch.canonical)
+        {
+            for (s, x) in self.init.shape_sum.iter_mut().zip(e.shape) {
+                *s += x;
+            }
+            self.init.shape_n += 1;
+        }
+        if self.init.shape_n >= self.cfg.shape_frames.max(1) {
+            let n = self.init.shape_n as f32;
+            let z = self.init.shape_sum.map(|s| s / n);
+            self.finish_init(frame, &bed, Some(&observed), z, clock, watch);
+        }
+        watch.lap(clock, Stage::Init);
+    }
+
+    fn finish_init(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        bed: &BedScene,
+        observed: Option<&[Point3; P]>,
+        mut z: [f32; SHAPE_COMPONENTS],
+        clock: &(impl Clock + ?Sized),
+        watch: &Stopwatch,
+    ) {
+        let body = self.models.body;
+        let up = bed.mattress.normal();
+        let mut camera_from_body = None;
+        if let Some(observed) = observed
+            && self.cfg.refine_shape
+        {
+            if watch.elapsed(clock) > self.cfg.budget.frame_us / 2 {
+                self.counters.refinements_skipped += 1;
+            } else if let Ok(start) = fit::initial_pose(&body, &z, observed, &up) {
+                let mut coeffs = [0usize; SHAPE_COMPONENTS];
+                let mut m = 0;
+                for (i, &t) in self.cfg.torso_coeffs.iter().enumerate() {
+                    if t {
+                        coeffs[m] = i;
+                        m += 1;
+                    }
+                }
+                let params =
+                    FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed.mattress), &coeffs[..m]);
+                if let Ok(r) = fit::fit_shape(
+                    &body,
+                    frame,
+                    &self.k,
+                    &z,
+                    start,
+                    &params,
+                    self.scratch.fit_points,
+                    self.scratch.fit_normals,
+                ) {
+                    z = r.shape;
+                    camera_from_body = Some(r.camera_from_model);
+                }
+            }
+        }
+        let mut raw = [0.0f32; SHAPE_COMPONENTS];
+        for (i, r) in raw.iter_mut().enumerate() {
+            *r = z[i] * body.sigma(i);
+        }
+        let built = TorsoSurface::build(
+            &body,
+            &raw,
+            TorsoBuffers {
+                vertices: self.scratch.torso_vertices,
+                normals: self.scratch.torso_normals,
+                regions: self.scratch.torso_regions,
+            },
+        );
+        let Ok(surface) = built else {
+            // The scratch lengths were checked when the tracker was built.
+            return;
+        };
+        let body_from_torso = surface.body_from_torso();
+        let torso_from_body = body_from_torso.inverse();
+        let salient_torso = body
+            .salient_points(&raw)
+            .map(|p| torso_from_body * Point3::from(p));
+        self.pose = camera_from_body
+            .map(|c| c * body_from_torso)
+            .or_else(|| observed.and_then(torso::a_from_torso));
+        self.torso = Some(TorsoModel {
+            bed: *bed,
+            body_from_torso,
+            salient_torso,
+            shape: z,
+        });
+        self.shape_revision = self.shape_revision.wrapping_add(1);
+        self.last_shape_frame = None;
+        self.machine.init_done();
+    }
+
+    fn track(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        arm: Option<&ArmSample>,
+        clock: &(impl Clock + ?Sized),
+        watch: &mut Stopwatch,
+        report: &mut FrameReport,
+    ) {
+        let Some(t) = self.torso else {
+            return;
+        };
+        let variant = self.cfg.variant;
+        let mut priors = [None; P];
+        let prior_pose = match self.machine.state() {
+            TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded => self.pose,
+            _ => None,
+        };
+        if variant == Variant::ForestIcpFeedback
+            && let Some(pose) = prior_pose
+        {
+            let s = self.cfg.prior_sigma_m;
+            for (prior, p) in priors.iter_mut().zip(&t.salient_torso) {
+                *prior = Some(Prior {
+                    mean: (pose * p).coords.into(),
+                    sigma_m: [s; 3],
+                });
+            }
+        }
+        let points = self.forest(frame, &t.bed, &priors);
+        report.forest_points = points;
+        watch.lap(clock, Stage::Forest);
+        let forest_pose = forest_pose(&points, &t.salient_torso);
+        let (quality, cut) = if variant == Variant::Forest {
+            match forest_pose {
+                Some(p) => {
+                    self.pose = Some(p);
+                    (FitQuality::Good, false)
+                }
+                None => (FitQuality::Failed, false),
+            }
+        } else {
+            // Starts, best first: the last refined pose (feedback), the forest's pose, and when acquiring without
+            // a pose, the forest's pose turned about the body's long axis (its roll is the least certain part).
+            let mut starts: heapless::Vec<Isometry3, 4> = heapless::Vec::new();
+            if variant == Variant::ForestIcpFeedback
+                && let Some(p) = prior_pose
+            {
+                let _ = starts.push(p);
+            }
+            if let Some(f) = forest_pose {
+                let _ = starts.push(f);
+                if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
+                    for roll in ACQUIRE_ROLLS_RAD {
+                        let _ = starts.push(f * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll));
+                    }
+                }
+            }
+            let params = torso_icp::icp_params(&self.cfg.icp, t.bed.mattress);
+            let mut best: Option<(Isometry3, TorsoFit, FitQuality)> = None;
+            for start in &starts {
+                let (pose, fit) = torso_icp::fit_torso(
+                    frame,
+                    &self.k,
+                    self.scratch.torso_vertices,
+                    self.scratch.torso_normals,
+                    *start,
+                    &self.cfg.icp,
+                    &params,
+                    &self.cfg.budget,
+                    clock,
+                    watch,
+                );
+                let q = fit.quality(&self.cfg.icp);
+                let better = match &best {
+                    None => true,
+                    Some((_, bf, bq)) => {
+                        rank(q) > rank(*bq)
+                            || (rank(q) == rank(*bq) && fit.association.rms_m() < bf.association.rms_m())
+                    }
+                };
+                if better {
+                    best = Some((pose, fit, q));
+                }
+                // A good fit from the temporal start is the common case: no second opinion needed.
+                if q == FitQuality::Good && prior_pose.is_some() {
+                    break;
+                }
+                if !budget::iteration_fits(
+                    &self.cfg.budget,
+                    watch.elapsed(clock),
+                    watch.times.of(Stage::Forest) / 4,
+                ) {
+                    break;
+                }
+            }
+            match best {
+                None => (FitQuality::Failed, false),
+                Some((pose, fit, q)) => {
+                    report.fit = fit;
+                    match q {
+                        FitQuality::Good => self.pose = Some(pose),
+                        // Coasting: the pose stays where the last good fit left it.
+                        FitQuality::Occluded | FitQuality::Failed => {
+                            if prior_pose.is_none() {
+                                self.pose = None;
+                            }
+                        }
+                    }
+                    if fit.cut {
+                        self.counters.icp_cuts += 1;
+                    }
+                    (q, fit.cut)
+                }
+            }
+        };
+        watch.lap(clock, Stage::Icp);
+        self.machine.fitted(quality, cut);
+        if !self.machine.has_pose() {
+            if self.machine.state() == TrackerState::Lost {
+                self.pose = None;
+            }
+            return;
+        }
+        let Some(pose) = self.pose else {
+            return;
+        };
+        report.camera_from_torso = Some(pose);
+        report.salient_camera = Some(if variant == Variant::Forest {
+            all_points(&points).unwrap_or(t.salient_torso.map(|p| pose * p))
+        } else {
+            t.salient_torso.map(|p| pose * p)
+        });
+        if let (Some(a), Some(surface)) = (arm, self.surface()) {
+            let tip = probe::tip_in_torso(&a.tip_robot_base, &self.cfg.robot_base_from_camera, &pose);
+            report.probe = probe::map_tip(&surface, &tip);
+            report.arm_age_us = Some(frame.capture.since(a.time));
+        }
+    }
+
+    fn packets(&mut self, time: Timestamp, report: &mut FrameReport) {
+        let rb = self.cfg.robot_base_from_camera;
+        if let (Some(pose), Some(points)) = (report.camera_from_torso, report.salient_camera) {
+            let conf = match report.state {
+                TrackerState::Occluded => Confidence::from_fraction(0.3),
+                _ if self.cfg.variant == Variant::Forest => Confidence::from_fraction(
+                    report
+                        .forest_points
+                        .iter()
+                        .flatten()
+                        .map(|p| p.confidence)
+                        .sum::<f32>()
+                        / P as f32,
+                ),
+                _ => Confidence::from_fraction(report.fit.visible),
+            };
+            let rb_torso = rb * pose;
+            let body = wire::Body::TorsoPose(TorsoPose {
+                position_mm: mm(&Point3::from(rb_torso.translation.vector)),
+                orientation: quat_q14(&rb_torso.rotation),
+                confidence: conf,
+            });
+            let m = self.message(time, body);
+            let _ = report.packets.push(m);
+            let mut sp = [SalientPointReport {
+                position_mm: [0; 3],
+                confidence: conf,
+            }; P];
+            for (r, p) in sp.iter_mut().zip(&points) {
+                r.position_mm = mm(&(rb * p));
+            }
+            let m = self.message(time, wire::Body::SalientPoints(SalientPoints { points: sp }));
+            let _ = report.packets.push(m);
+        }
+        if let Some(p) = report.probe {
+            let m = self.message(time, wire::Body::Probe(p.report()));
+            let _ = report.packets.push(m);
+        }
+        if let Some(t) = self.torso {
+            let due = match self.last_shape_frame {
+                None => true,
+                Some(f) => self.frames.wrapping_sub(f) >= self.cfg.shape_every_frames.max(1),
+            };
+            if due {
+                let coefficients_milli = t
+                    .shape
+                    .map(|c| libm::roundf(c * 1000.0).clamp(-32767.0, 32767.0) as i16);
+                let body = wire::Body::BodyShape(BodyShape {
+                    revision: self.shape_revision,
+                    coefficients_milli,
+                });
+                let m = self.message(time, body);
+                let _ = report.packets.push(m);
+                self.last_shape_frame = Some(self.frames);
+            }
+        }
+    }
+}

@@ -1,0 +1,565 @@
+//! `supine-models eval tracking --data DIR [--json FILE] [--png DIR]`: run the real-time tracker
+//! (`supine_core::tracker`) over generated sequences (`supine-models sequence`) in each of its three variants and
+//! score it against the ground truth, frame by frame.
+//!
+//! Figures (JSON keys in shared/design/cli.md):
+//! - torso surface error: mean distance between each vertex of the tracked, shaped torso model and the same vertex of
+//!   the true torso (the body model torso subset with the patient's true shape, placed by the true torso pose), mm.
+//!   Vertex to vertex is stricter than point to surface: it also counts sliding along the skin.
+//! - salient-point error: the six points the tracker reports against the true ones, mm.
+//! - probe mapping: the arm state (the true probe tip in `robot_base`, or `DIR/arm.jsonl` when present) mapped
+//!   through the tracker's pose onto its torso model, against the same tip mapped through the true pose onto the
+//!   true torso: the nearest points' distance (camera frame) and the signed-distance difference, mm, over frames
+//!   whose true tip lies within 5 cm of the skin (where mapping matters).
+//! - tracked fraction: frames after the init phase whose state carries a pose.
+//! - latency: per-frame processing time on this machine (one thread), p50 and p99.
+//!
+//! Cost: one .oni decode and one tracker frame per frame and variant, plus the scoring (~1250 vertices).
+
+use anyhow::{Context, Result, bail, ensure};
+use serde_json::{Value, json};
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+use supine_core::body_model::{BodyModelView, SHAPE_COMPONENTS};
+use supine_core::camera::Intrinsics;
+use supine_core::forest::infer::Workspace;
+use supine_core::forest::model::ForestView;
+use supine_core::geometry::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use supine_core::probe;
+use supine_core::shape::ShapeModelView;
+use supine_core::torso::{TorsoBuffers, TorsoSurface};
+use supine_core::tracker::{
+    ArmSample, FrameReport, Models, Scratch, ScratchSizes, Tracker, TrackerConfig, Variant,
+};
+use supine_core::wire::{BodyRegion, TrackerState};
+use supine_drivers::SourceErrorKind;
+use supine_drivers::clock::MonotonicClock;
+use supine_drivers::oni::OniReader;
+
+use crate::sequence::{FrameTruth, SequenceMeta};
+
+/// Arguments of `supine-models eval tracking`.
+#[derive(Debug, clap::Args)]
+pub struct TrackingEvalArgs {
+    /// A sequence directory, or a folder of them.
+    #[arg(long)]
+    pub data: PathBuf,
+    /// Write the report here.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write plots over time (error, state, occluded fraction) here as PNG, one per sequence.
+    #[arg(long)]
+    pub png: Option<PathBuf>,
+    /// Directory of the model files body.sbm, joints.jfor, shape.ssm (default: the committed models/artifacts).
+    #[arg(long)]
+    pub models: Option<PathBuf>,
+    /// Variants to run (default: all three).
+    #[arg(long, value_delimiter = ',')]
+    pub variants: Vec<String>,
+    /// Diagnostic: give the tracker the patient's true shape (the init phase then finds only the bed), to separate
+    /// tracking error from shape error.
+    #[arg(long)]
+    pub true_shape: bool,
+}
+
+/// The model files, read once.
+pub struct ModelBytes {
+    /// body.sbm.
+    pub body: Vec<u8>,
+    /// joints.jfor.
+    pub joints: Vec<u8>,
+    /// shape.ssm.
+    pub shape: Vec<u8>,
+}
+
+impl ModelBytes {
+    /// Read the three files from `dir`.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let read = |name: &str| {
+            let p = dir.join(name);
+            std::fs::read(&p).with_context(|| format!("reading model {}", p.display()))
+        };
+        Ok(ModelBytes {
+            body: read("body.sbm")?,
+            joints: read("joints.jfor")?,
+            shape: read("shape.ssm")?,
+        })
+    }
+
+    /// Parsed views.
+    pub fn views(&self) -> Result<Models<'_>> {
+        Ok(Models {
+            body: BodyModelView::parse(&self.body).context("body.sbm")?,
+            joints: ForestView::parse(&self.joints).context("joints.jfor")?,
+            shape: ShapeModelView::parse(&self.shape).context("shape.ssm")?,
+        })
+    }
+}
+
+/// Owned scratch for a tracker (allocated once, before the first frame).
+pub struct ScratchStore {
+    plane_points: Vec<Point3>,
+    plane_labels: Vec<u8>,
+    canonical: Vec<f32>,
+    fit_points: Vec<[f32; 3]>,
+    fit_normals: Vec<[f32; 3]>,
+    torso_vertices: Vec<Point3>,
+    torso_normals: Vec<Vector3>,
+    torso_regions: Vec<BodyRegion>,
+    forest: Box<Workspace>,
+}
+
+impl ScratchStore {
+    /// Buffers of the sizes `sizes` asks for.
+    pub fn new(sizes: &ScratchSizes) -> Self {
+        ScratchStore {
+            plane_points: vec![Point3::origin(); sizes.plane_points],
+            plane_labels: vec![0; sizes.plane_points],
+            canonical: vec![0.0; sizes.canonical],
+            fit_points: vec![[0.0; 3]; sizes.torso],
+            fit_normals: vec![[0.0; 3]; sizes.torso],
+            torso_vertices: vec![Point3::origin(); sizes.torso],
+            torso_normals: vec![Vector3::zeros(); sizes.torso],
+            torso_regions: vec![BodyRegion::OffBody; sizes.torso],
+            forest: Box::new(Workspace::new()),
+        }
+    }
+
+    /// The tracker's view of the buffers.
+    pub fn scratch(&mut self) -> Scratch<'_> {
+        Scratch {
+            plane_points: &mut self.plane_points,
+            plane_labels: &mut self.plane_labels,
+            canonical: &mut self.canonical,
+            fit_points: &mut self.fit_points,
+            fit_normals: &mut self.fit_normals,
+            torso_vertices: &mut self.torso_vertices,
+            torso_normals: &mut self.torso_normals,
+            torso_regions: &mut self.torso_regions,
+            forest: &mut self.forest,
+        }
+    }
+}
+
+/// A 4x4 row-major rigid transform as an isometry.
+pub fn isometry_of(m: &[[f32; 4]; 4]) -> Isometry3 {
+    let r = Matrix3::new(
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    );
+    Isometry3::from_parts(
+        Translation3::new(m[0][3], m[1][3], m[2][3]),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
+/// One generated sequence as the evaluation reads it.
+pub struct SequenceData {
+    /// Directory.
+    pub dir: PathBuf,
+    /// sequence.json.
+    pub meta: SequenceMeta,
+    /// truth.jsonl, one per frame.
+    pub truth: Vec<FrameTruth>,
+}
+
+impl SequenceData {
+    /// Read `dir`'s sequence.json and truth.jsonl.
+    pub fn load(dir: &Path) -> Result<Self> {
+        let meta_path = dir.join("sequence.json");
+        let meta: SequenceMeta = serde_json::from_slice(
+            &std::fs::read(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?,
+        )
+        .with_context(|| format!("parsing {}", meta_path.display()))?;
+        let truth_path = dir.join("truth.jsonl");
+        let text = std::fs::read_to_string(&truth_path)
+            .with_context(|| format!("reading {}", truth_path.display()))?;
+        let truth = text
+            .lines()
+            .enumerate()
+            .filter(|(_, l)| !l.trim().is_empty())
+            .map(|(i, l)| {
+                serde_json::from_str::<FrameTruth>(l)
+                    .with_context(|| format!("{} line {}", truth_path.display(), i + 1))
+            })
+            .collect::<Result<Vec<_>>>()?;
+        ensure!(!truth.is_empty(), "{} holds no frames", truth_path.display());
+        Ok(SequenceData {
+            dir: dir.to_path_buf(),
+            meta,
+            truth,
+        })
+    }
+
+    /// `robot_base_from_camera` (the sequence's world frame is `robot_base`).
+    pub fn robot_base_from_camera(&self) -> Isometry3 {
+        isometry_of(&self.meta.camera_from_world).inverse()
+    }
+}
+
+/// The sequence directories under `data` (itself when it holds a sequence.json).
+pub fn sequence_dirs(data: &Path) -> Result<Vec<PathBuf>> {
+    if data.join("sequence.json").is_file() {
+        return Ok(vec![data.to_path_buf()]);
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(data)
+        .with_context(|| format!("reading {}", data.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("sequence.json").is_file())
+        .collect();
+    dirs.sort();
+    if dirs.is_empty() {
+        bail!(
+            "{} holds no sequence (no sequence.json in it or its subdirectories)",
+            data.display()
+        );
+    }
+    Ok(dirs)
+}
+
+/// The true torso surface of a sequence's patient (torso frame), in owned buffers.
+pub struct TrueTorso {
+    vertices: Vec<Point3>,
+    normals: Vec<Vector3>,
+    regions: Vec<BodyRegion>,
+    body_from_torso: Isometry3,
+}
+
+impl TrueTorso {
+    /// Shape the body model's torso subset with the patient's coefficients (σ units).
+    pub fn new(body: &BodyModelView<'_>, shape_sigma: &[f32]) -> Result<Self> {
+        let n = body.counts().subset;
+        let mut raw = [0.0f32; SHAPE_COMPONENTS];
+        for (i, r) in raw.iter_mut().enumerate() {
+            *r = shape_sigma.get(i).copied().unwrap_or(0.0) * body.sigma(i);
+        }
+        let mut t = TrueTorso {
+            vertices: vec![Point3::origin(); n],
+            normals: vec![Vector3::zeros(); n],
+            regions: vec![BodyRegion::OffBody; n],
+            body_from_torso: Isometry3::identity(),
+        };
+        let s = TorsoSurface::build(
+            body,
+            &raw,
+            TorsoBuffers {
+                vertices: &mut t.vertices,
+                normals: &mut t.normals,
+                regions: &mut t.regions,
+            },
+        )?;
+        t.body_from_torso = s.body_from_torso();
+        Ok(t)
+    }
+
+    /// The surface view.
+    pub fn surface<'a>(&'a self, body: &BodyModelView<'a>) -> Option<TorsoSurface<'a>> {
+        TorsoSurface::from_parts(
+            body,
+            &self.vertices,
+            &self.normals,
+            &self.regions,
+            self.body_from_torso,
+        )
+    }
+}
+
+/// Per-frame scores of one variant.
+#[derive(Debug, Clone, Default, serde::Serialize)]
+pub struct FrameScore {
+    /// Frame index.
+    pub frame: u32,
+    /// State after the frame.
+    pub state: String,
+    /// Torso surface error, mm (frames with a pose).
+    pub torso_mm: Option<f32>,
+    /// Salient-point error, mm.
+    pub point_mm: Option<f32>,
+    /// Probe nearest-point error, mm.
+    pub probe_mm: Option<f32>,
+    /// Probe signed-distance error, mm.
+    pub probe_distance_mm: Option<f32>,
+    /// Processing time, ms.
+    pub ms: f32,
+    /// True occluded fraction of the torso.
+    pub occluded: f32,
+}
+
+fn mean(v: impl Iterator<Item = f32>) -> Option<f32> {
+    let (s, n) = v.fold((0.0f64, 0usize), |(s, n), x| (s + x as f64, n + 1));
+    (n > 0).then(|| (s / n as f64) as f32)
+}
+
+fn percentile(v: &mut [f32], q: f32) -> Option<f32> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f32::total_cmp);
+    let i = ((v.len() - 1) as f32 * q).round() as usize;
+    Some(v[i])
+}
+
+/// Run `variant` over one sequence, scoring each frame.
+pub fn run_variant(
+    models: &Models<'_>,
+    seq: &SequenceData,
+    variant: Variant,
+    truth_torso: &TrueTorso,
+    true_shape: bool,
+) -> Result<(Vec<FrameScore>, Value)> {
+    let k = Intrinsics::KINECT_V1;
+    let mut cfg = TrackerConfig {
+        variant,
+        robot_base_from_camera: seq.robot_base_from_camera(),
+        ..TrackerConfig::default()
+    };
+    cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
+    if true_shape {
+        let mut z = [0.0; SHAPE_COMPONENTS];
+        for (o, s) in z.iter_mut().zip(&seq.meta.shape) {
+            *o = *s;
+        }
+        cfg.known_shape = Some(z);
+    }
+    let sizes = ScratchSizes::of(models, &k, &cfg.planes);
+    let mut store = ScratchStore::new(&sizes);
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch())?;
+    let oni = seq.dir.join("sequence.oni");
+    let mut reader = OniReader::open(&oni).with_context(|| format!("opening {}", oni.display()))?;
+    let clock = MonotonicClock;
+    let true_surface = truth_torso
+        .surface(&models.body)
+        .context("true torso surface has the wrong size")?;
+    let mut scores = Vec::with_capacity(seq.truth.len());
+    let mut i = 0usize;
+    let mut init_frames = None;
+    loop {
+        let frame = match reader.read_frame() {
+            Ok(f) => f,
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e) => bail!("reading {}: {e}", oni.display()),
+        };
+        let Some(t) = seq.truth.get(i) else {
+            bail!("{} has more frames than truth.jsonl", oni.display());
+        };
+        let arm = t.world_from_probe.as_ref().map(|m| ArmSample {
+            time: frame.capture,
+            tip_robot_base: Point3::from(isometry_of(m).translation.vector),
+            robot_base_from_probe: isometry_of(m).rotation,
+        });
+        let r: FrameReport = tracker.process(&frame, arm.as_ref(), &clock);
+        if init_frames.is_none() && tracker.state() != TrackerState::Initialising {
+            init_frames = Some(i as u32 + 1);
+        }
+        let mut s = FrameScore {
+            frame: i as u32,
+            state: r.state.name().to_string(),
+            ms: r.times.total() as f32 / 1000.0,
+            occluded: t.torso_occluded_fraction,
+            ..FrameScore::default()
+        };
+        let camera_from_true = isometry_of(&t.camera_from_torso);
+        if let (Some(pose), Some(surface)) = (r.camera_from_torso, tracker.surface()) {
+            s.torso_mm = mean(
+                surface
+                    .vertices()
+                    .iter()
+                    .zip(true_surface.vertices())
+                    .map(|(e, g)| (pose * e - camera_from_true * g).norm() * 1000.0),
+            );
+            if let Some(points) = r.salient_camera {
+                s.point_mm = mean(
+                    points
+                        .iter()
+                        .zip(&t.salient_camera)
+                        .map(|(p, g)| (p - Point3::from(*g)).norm() * 1000.0),
+                );
+            }
+            if let (Some(m), Some(a)) = (r.probe, arm.as_ref()) {
+                let tip =
+                    probe::tip_in_torso(&a.tip_robot_base, &cfg.robot_base_from_camera, &camera_from_true);
+                if let Some(g) = probe::map_tip(&true_surface, &tip)
+                    && g.signed_distance.abs() < 0.05
+                {
+                    s.probe_mm = Some((pose * m.nearest - camera_from_true * g.nearest).norm() * 1000.0);
+                    s.probe_distance_mm = Some((m.signed_distance - g.signed_distance).abs() * 1000.0);
+                }
+            }
+        }
+        scores.push(s);
+        i += 1;
+    }
+    let after_init: Vec<&FrameScore> = scores
+        .iter()
+        .skip(init_frames.unwrap_or(scores.len() as u32) as usize)
+        .collect();
+    let tracked = after_init.iter().filter(|s| s.torso_mm.is_some()).count();
+    let mut states = serde_json::Map::new();
+    for s in &scores {
+        let e = states.entry(s.state.clone()).or_insert(json!(0));
+        *e = json!(e.as_u64().unwrap_or(0) + 1);
+    }
+    let mut ms: Vec<f32> = after_init.iter().map(|s| s.ms).collect();
+    let recovery = recovery_frames(seq, &scores);
+    let c = tracker.counters();
+    let summary = json!({
+        "frames": scores.len(),
+        "init_frames": init_frames,
+        "tracked_fraction": if after_init.is_empty() { 0.0 } else { tracked as f32 / after_init.len() as f32 },
+        "torso_surface_error_mm_mean": mean(scores.iter().filter_map(|s| s.torso_mm)),
+        "point_error_mm_mean": mean(scores.iter().filter_map(|s| s.point_mm)),
+        "probe_error_mm_mean": mean(scores.iter().filter_map(|s| s.probe_mm)),
+        "probe_distance_error_mm_mean": mean(scores.iter().filter_map(|s| s.probe_distance_mm)),
+        "recovery_frames": recovery,
+        "states": states,
+        "latency_ms_p50": percentile(&mut ms, 0.5),
+        "latency_ms_p99": percentile(&mut ms, 0.99),
+        "budget_overruns": c.overruns,
+        "icp_cuts": c.icp_cuts,
+    });
+    Ok((scores, summary))
+}
+
+/// Frames from the end of the full-occlusion episode (`sequence.json`'s `full_occlusion` frame range, when the
+/// sequence has one) to the first frame tracked again with a torso error under 20 mm; `None` without an episode.
+fn recovery_frames(seq: &SequenceData, scores: &[FrameScore]) -> Option<u32> {
+    let raw = std::fs::read(seq.dir.join("sequence.json")).ok()?;
+    let v: Value = serde_json::from_slice(&raw).ok()?;
+    let end = v.get("full_occlusion")?.get("end_frame")?.as_u64()? as usize;
+    scores
+        .iter()
+        .skip(end)
+        .position(|s| s.torso_mm.is_some_and(|e| e < 20.0))
+        .map(|p| p as u32)
+}
+
+fn variants(names: &[String]) -> Result<Vec<Variant>> {
+    if names.is_empty() {
+        return Ok(Variant::ALL.to_vec());
+    }
+    names
+        .iter()
+        .map(|n| {
+            Variant::ALL
+                .into_iter()
+                .find(|v| v.name() == n)
+                .with_context(|| format!("unknown variant `{n}` (forest, forest_icp, forest_icp_feedback)"))
+        })
+        .collect()
+}
+
+/// Average the per-sequence summaries of one variant (frame-weighted for rates, mean for errors).
+fn combine(summaries: &[Value]) -> Value {
+    let num =
+        |k: &str| -> Option<f32> { mean(summaries.iter().filter_map(|s| s[k].as_f64().map(|x| x as f32))) };
+    let max = |k: &str| -> Option<f32> {
+        summaries
+            .iter()
+            .filter_map(|s| s[k].as_f64().map(|x| x as f32))
+            .reduce(f32::max)
+    };
+    let mut states = serde_json::Map::new();
+    for s in summaries {
+        if let Some(m) = s["states"].as_object() {
+            for (k, v) in m {
+                let e = states.entry(k.clone()).or_insert(json!(0));
+                *e = json!(e.as_u64().unwrap_or(0) + v.as_u64().unwrap_or(0));
+            }
+        }
+    }
+    json!({
+        "frames": summaries.iter().map(|s| s["frames"].as_u64().unwrap_or(0)).sum::<u64>(),
+        "tracked_fraction": num("tracked_fraction"),
+        "torso_surface_error_mm_mean": num("torso_surface_error_mm_mean"),
+        "point_error_mm_mean": num("point_error_mm_mean"),
+        "probe_error_mm_mean": num("probe_error_mm_mean"),
+        "probe_distance_error_mm_mean": num("probe_distance_error_mm_mean"),
+        "recovery_frames": max("recovery_frames"),
+        "states": states,
+        "latency_ms_p50": num("latency_ms_p50"),
+        "latency_ms_p99": max("latency_ms_p99"),
+        "budget_overruns": summaries.iter().map(|s| s["budget_overruns"].as_u64().unwrap_or(0)).sum::<u64>(),
+    })
+}
+
+/// Run the command.
+pub fn run(args: &TrackingEvalArgs) -> ExitCode {
+    match evaluate(args) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e:#}");
+            ExitCode::from(1)
+        }
+    }
+}
+
+fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
+    let dirs = sequence_dirs(&args.data)?;
+    let wanted = variants(&args.variants)?;
+    let model_dir = args
+        .models
+        .clone()
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts"));
+    let bytes = ModelBytes::load(&model_dir)?;
+    let models = bytes.views()?;
+    let mut per_variant: Vec<(Variant, Vec<Value>)> = wanted.iter().map(|v| (*v, Vec::new())).collect();
+    let mut sequences = Vec::new();
+    for dir in &dirs {
+        let seq = SequenceData::load(dir)?;
+        let truth_torso = TrueTorso::new(&models.body, &seq.meta.shape)?;
+        let mut per_seq = serde_json::Map::new();
+        let mut plots = Vec::new();
+        for (variant, acc) in per_variant.iter_mut() {
+            let (scores, summary) = run_variant(&models, &seq, *variant, &truth_torso, args.true_shape)?;
+            eprintln!(
+                "{}  {:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm  p50 {:.2} ms",
+                dir.file_name().unwrap_or_default().to_string_lossy(),
+                variant.name(),
+                summary["tracked_fraction"].as_f64().unwrap_or(0.0),
+                summary["torso_surface_error_mm_mean"]
+                    .as_f64()
+                    .unwrap_or(f64::NAN),
+                summary["point_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                summary["probe_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                summary["latency_ms_p50"].as_f64().unwrap_or(f64::NAN),
+            );
+            per_seq.insert(variant.name().to_string(), summary.clone());
+            acc.push(summary);
+            plots.push((*variant, scores));
+        }
+        if let Some(png) = &args.png {
+            std::fs::create_dir_all(png).with_context(|| format!("creating {}", png.display()))?;
+            let name = dir.file_name().unwrap_or_default().to_string_lossy().to_string();
+            let path = png.join(format!("tracking-{name}.png"));
+            super::tracking_plot::write_png(&path, &name, &plots)?;
+        }
+        sequences.push(json!({"sequence": dir.display().to_string(), "variants": per_seq}));
+    }
+    let mut report = serde_json::Map::new();
+    for (variant, acc) in &per_variant {
+        report.insert(variant.name().to_string(), combine(acc));
+    }
+    report.insert("sequences".into(), json!(sequences));
+    report.insert("commit".into(), json!(crate::shape::eval::commit()));
+    let report = Value::Object(report);
+    for (variant, _) in &per_variant {
+        let r = &report[variant.name()];
+        println!(
+            "{:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm ({:.1} mm distance)  \
+             recovery {}  p50 {:.2} ms  p99 {:.2} ms",
+            variant.name(),
+            r["tracked_fraction"].as_f64().unwrap_or(0.0),
+            r["torso_surface_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+            r["point_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+            r["probe_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+            r["probe_distance_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+            r["recovery_frames"],
+            r["latency_ms_p50"].as_f64().unwrap_or(f64::NAN),
+            r["latency_ms_p99"].as_f64().unwrap_or(f64::NAN),
+        );
+    }
+    if let Some(path) = &args.json {
+        std::fs::write(path, serde_json::to_vec_pretty(&report)?)
+            .with_context(|| format!("writing {}", path.display()))?;
+    }
+    Ok(())
+}

@@ -1,0 +1,286 @@
+//! The real-time tracker (`supine_core::tracker`) on the committed demo recording with the committed default
+//! models: it initialises and tracks, allocates nothing per frame, replays bit-identically, ICP converges back from
+//! a known perturbation, and bad frames (empty, wrong size, no patient) lead to defined states.
+
+use std::path::Path;
+use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
+use supine_core::geometry::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use supine_core::time::{Timestamp, VirtualClock};
+use supine_core::tracker::budget::Stopwatch;
+use supine_core::tracker::torso_icp::{self, TorsoIcpConfig};
+use supine_core::tracker::{Models, ScratchSizes, Tracker, TrackerConfig};
+use supine_core::wire::{Message, TrackerState};
+use supine_drivers::SourceErrorKind;
+use supine_drivers::oni::OniReader;
+use supine_models::eval::tracking::{ModelBytes, ScratchStore, SequenceData, isometry_of};
+use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
+
+#[global_allocator]
+static ALLOC: Counting = Counting;
+
+fn demo_dir() -> std::path::PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo")
+}
+
+fn models() -> ModelBytes {
+    ModelBytes::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts")).expect("committed models")
+}
+
+/// The demo's frames, decoded once: depth and capture time.
+fn frames() -> Vec<(Vec<u16>, Timestamp)> {
+    let mut r = OniReader::open(demo_dir().join("sequence.oni")).expect("demo recording");
+    let mut out = Vec::new();
+    loop {
+        match r.read_frame() {
+            Ok(f) => out.push((f.depth_mm().to_vec(), f.capture)),
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e) => panic!("demo recording: {e}"),
+        }
+    }
+    assert_eq!(out.len(), 60);
+    out
+}
+
+fn config(seq: &SequenceData) -> TrackerConfig {
+    let mut cfg = TrackerConfig {
+        robot_base_from_camera: seq.robot_base_from_camera(),
+        ..TrackerConfig::default()
+    };
+    cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
+    cfg
+}
+
+fn frame(depth: &[u16], t: Timestamp, index: u32) -> DepthFrame<'_> {
+    DepthFrame::new(depth, 640, 480, t, index).unwrap()
+}
+
+/// Run `n` frames (the demo played forth and back) and return every packet, the states, and the allocations made
+/// by `process` after the init phase.
+fn run(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    frames: &[(Vec<u16>, Timestamp)],
+    n: usize,
+) -> (Vec<Message>, Vec<TrackerState>, u64) {
+    let k = Intrinsics::KINECT_V1;
+    let mut store = ScratchStore::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let mut packets = Vec::with_capacity(n * 5);
+    let mut states = Vec::with_capacity(n);
+    let mut allocations = 0;
+    for i in 0..n {
+        // Forth and back: 0..59, 58..1, 0..59, ... so the motion stays continuous.
+        let period = 2 * (frames.len() - 1);
+        let j = i % period;
+        let j = if j < frames.len() { j } else { period - j };
+        let t = Timestamp::from_us(1 + i as u64 * 33_333).unwrap();
+        let f = frame(&frames[j].0, t, i as u32);
+        clock.set(t);
+        let initialised = tracker.state() != TrackerState::Initialising;
+        let (r, a) = count_allocations(|| tracker.process(&f, None, &clock));
+        if initialised {
+            allocations += a;
+        }
+        states.push(r.state);
+        packets.extend(r.packets.iter().copied());
+    }
+    (packets, states, allocations)
+}
+
+#[test]
+fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
+    assert!(counter_is_installed());
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let cfg = config(&seq);
+    let (packets, states, allocations) = run(&models, cfg, &frames, 1000);
+    assert_eq!(allocations, 0, "the tracker allocated after init");
+    let init = states
+        .iter()
+        .position(|s| *s != TrackerState::Initialising)
+        .expect("init finished");
+    assert!(init <= 90, "init took {init} frames (3 s)");
+    let tracked = states[init..]
+        .iter()
+        .filter(|s| {
+            matches!(
+                s,
+                TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
+            )
+        })
+        .count();
+    assert!(
+        tracked as f32 >= 0.9 * (states.len() - init) as f32,
+        "tracked {tracked} of {} frames after init",
+        states.len() - init
+    );
+    // Every frame ends with a health packet; sequence numbers count up by one.
+    for w in packets.windows(2) {
+        assert_eq!(w[1].seq, w[0].seq.wrapping_add(1));
+    }
+    // Replay: the same frames give the same packets, also from inside thread pools of other sizes.
+    let (again, _, _) = run(&models, cfg, &frames, 300);
+    assert_eq!(&packets[..again.len()], &again[..]);
+    for threads in [1, 2] {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let (p, _, _) = pool.install(|| run(&models, cfg, &frames, 120));
+        assert_eq!(&packets[..p.len()], &p[..], "{threads} threads");
+    }
+}
+
+#[test]
+fn icp_converges_back_from_a_known_perturbation() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let cfg = TrackerConfig {
+        known_shape: Some({
+            let mut z = [0.0; 20];
+            z.iter_mut().zip(&seq.meta.shape).for_each(|(o, s)| *o = *s);
+            z
+        }),
+        ..config(&seq)
+    };
+    let mut store = ScratchStore::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let mut converged: Option<Isometry3> = None;
+    for (i, (d, t)) in frames.iter().enumerate().take(20) {
+        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
+        converged = r.camera_from_torso.or(converged);
+    }
+    let converged = converged.expect("the tracker found the torso");
+    // The converged pose lies near the truth of the frame it came from.
+    let truth = isometry_of(&seq.truth[19].camera_from_torso);
+    assert!((converged.translation.vector - truth.translation.vector).norm() < 0.05);
+    let (d, t) = &frames[19];
+    let f = frame(d, *t, 19);
+    let surface = tracker.surface().unwrap();
+    let bed = tracker.bed().unwrap();
+    let icp = TorsoIcpConfig::default();
+    let params = torso_icp::icp_params(&icp, bed.mattress);
+    let budget = tracker.config().budget;
+    let (again, _) = torso_icp::fit_torso(
+        &f,
+        &k,
+        surface.vertices(),
+        surface.normals(),
+        converged,
+        &icp,
+        &params,
+        &budget,
+        &clock,
+        &Stopwatch::start(&clock),
+    );
+    for (dt, angle) in [
+        (Vector3::new(0.03, 0.0, 0.0), 0.0),
+        (Vector3::new(0.0, 0.02, -0.02), 0.05),
+        (Vector3::zeros(), -0.08),
+    ] {
+        // Shifted in the camera frame, turned about the torso's own long axis.
+        let start = Isometry3::from_parts(Translation3::from(dt), UnitQuaternion::identity())
+            * again
+            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle);
+        let (back, fit) = torso_icp::fit_torso(
+            &f,
+            &k,
+            surface.vertices(),
+            surface.normals(),
+            start,
+            &icp,
+            &params,
+            &budget,
+            &clock,
+            &Stopwatch::start(&clock),
+        );
+        let dp = (back.translation.vector - again.translation.vector).norm();
+        let da = back.rotation.angle_to(&again.rotation);
+        assert!(
+            dp < 0.005 && da < 0.02,
+            "from {dt:?} / {angle} rad: {dp} m, {da} rad off ({fit:?})"
+        );
+    }
+}
+
+#[test]
+fn bad_frames_lead_to_defined_states() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let cfg = config(&seq);
+    let mut store = ScratchStore::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let empty = vec![0u16; 640 * 480];
+    let t0 = Timestamp::from_us(1).unwrap();
+    // An empty frame during init: no bed, still initialising, a health packet says so.
+    let r = tracker.process(&frame(&empty, t0, 0), None, &clock);
+    assert_eq!(r.state, TrackerState::Initialising);
+    assert!(
+        matches!(r.packets.last().unwrap().body, supine_core::wire::Body::Health(h) if h.state == TrackerState::Initialising)
+    );
+    // A frame of the wrong size is rejected unprocessed.
+    let small = vec![1000u16; 320 * 240];
+    let r = tracker.process(&DepthFrame::new(&small, 320, 240, t0, 1).unwrap(), None, &clock);
+    assert!(r.rejected);
+    assert_eq!(r.state, TrackerState::Initialising);
+    for (i, (d, t)) in frames.iter().enumerate().take(30) {
+        tracker.process(&frame(d, *t, i as u32), None, &clock);
+    }
+    assert!(matches!(
+        tracker.state(),
+        TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
+    ));
+    // The patient leaves the bed: every pixel above the mattress is gone.
+    let bed = *tracker.bed().unwrap();
+    let (d, t) = &frames[30];
+    let mut gone = d.clone();
+    for (i, z) in gone.iter_mut().enumerate() {
+        let p = k.unproject((i % 640) as f32, (i / 640) as f32, *z as f32 * 0.001);
+        if *z != 0 && bed.mattress.signed_distance(&p) > 0.02 {
+            *z = 0;
+        }
+    }
+    let mut states = Vec::new();
+    for i in 0..10 {
+        states.push(tracker.process(&frame(&gone, *t, 30 + i), None, &clock).state);
+    }
+    assert!(states.contains(&TrackerState::Lost), "{states:?}");
+    assert_eq!(*states.last().unwrap(), TrackerState::Reacquiring);
+    // Empty frames keep it re-acquiring; the patient back, it tracks again.
+    for i in 0..3 {
+        assert_eq!(
+            tracker.process(&frame(&empty, *t, 40 + i), None, &clock).state,
+            TrackerState::Reacquiring
+        );
+    }
+    let mut back = TrackerState::Reacquiring;
+    for (i, (d, t)) in frames.iter().enumerate().skip(30).take(5) {
+        back = tracker.process(&frame(d, *t, 50 + i as u32), None, &clock).state;
+    }
+    assert!(
+        matches!(back, TrackerState::Tracking | TrackerState::Degraded),
+        "{back:?}"
+    );
+    // A sensor fault, then the re-initialise command.
+    tracker.sensor_fault();
+    assert_eq!(tracker.state(), TrackerState::SensorFault);
+    tracker.reinitialise();
+    assert_eq!(
+        tracker
+            .process(&frame(&frames[0].0, frames[0].1, 99), None, &clock)
+            .state,
+        TrackerState::Initialising
+    );
+}
