@@ -296,7 +296,7 @@ fn truncated_and_trailing_payloads() {
 fn out_of_range_values() {
     // Health state is byte 9 (after version, kind, seq 2 bytes, timestamp 5 bytes).
     let mut b = HEALTH.to_vec();
-    b[9] = 6;
+    b[9] = 8;
     recrc(&mut b);
     assert_eq!(decode_plain(&b), Err(DecodeError::InvalidValue));
     // Torso confidence is the last payload byte.
