@@ -16,6 +16,7 @@ pub mod oni;
 pub mod openni2;
 pub mod recording;
 pub mod source;
+pub mod tracker_host;
 pub mod v4l2;
 
 pub use source::{DepthSource, SourceError, SourceErrorKind, SourceSpec};

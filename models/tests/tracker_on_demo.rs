@@ -13,7 +13,8 @@ use supine_core::tracker::{Models, ScratchSizes, Tracker, TrackerConfig};
 use supine_core::wire::{Message, TrackerState};
 use supine_drivers::SourceErrorKind;
 use supine_drivers::oni::OniReader;
-use supine_models::eval::tracking::{ModelBytes, ScratchStore, SequenceData, isometry_of};
+use supine_drivers::tracker_host::{ModelFiles, TrackerScratch};
+use supine_models::eval::tracking::{SequenceData, isometry_of};
 use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
 
 #[global_allocator]
@@ -23,8 +24,8 @@ fn demo_dir() -> std::path::PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo")
 }
 
-fn models() -> ModelBytes {
-    ModelBytes::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts")).expect("committed models")
+fn models() -> ModelFiles {
+    ModelFiles::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts")).expect("committed models")
 }
 
 /// The demo's frames, decoded once: depth and capture time.
@@ -64,7 +65,7 @@ fn run(
     n: usize,
 ) -> (Vec<Message>, Vec<TrackerState>, u64) {
     let k = Intrinsics::KINECT_V1;
-    let mut store = ScratchStore::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
     let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
     let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let mut packets = Vec::with_capacity(n * 5);
@@ -150,7 +151,7 @@ fn icp_converges_back_from_a_known_perturbation() {
         }),
         ..config(&seq)
     };
-    let mut store = ScratchStore::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
     let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
     let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let mut converged: Option<Isometry3> = None;
@@ -219,7 +220,7 @@ fn bad_frames_lead_to_defined_states() {
     let frames = frames();
     let k = Intrinsics::KINECT_V1;
     let cfg = config(&seq);
-    let mut store = ScratchStore::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
     let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
     let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let empty = vec![0u16; 640 * 480];

@@ -22,19 +22,15 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::body_model::{BodyModelView, SHAPE_COMPONENTS};
 use supine_core::camera::Intrinsics;
-use supine_core::forest::infer::Workspace;
-use supine_core::forest::model::ForestView;
 use supine_core::geometry::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use supine_core::probe;
-use supine_core::shape::ShapeModelView;
 use supine_core::torso::{TorsoBuffers, TorsoSurface};
-use supine_core::tracker::{
-    ArmSample, FrameReport, Models, Scratch, ScratchSizes, Tracker, TrackerConfig, Variant,
-};
+use supine_core::tracker::{ArmSample, FrameReport, Models, ScratchSizes, Tracker, TrackerConfig, Variant};
 use supine_core::wire::{BodyRegion, TrackerState};
 use supine_drivers::SourceErrorKind;
 use supine_drivers::clock::MonotonicClock;
 use supine_drivers::oni::OniReader;
+use supine_drivers::tracker_host::{ModelFiles, TrackerScratch};
 
 use crate::sequence::{FrameTruth, SequenceMeta};
 
@@ -60,85 +56,6 @@ pub struct TrackingEvalArgs {
     /// tracking error from shape error.
     #[arg(long)]
     pub true_shape: bool,
-}
-
-/// The model files, read once.
-pub struct ModelBytes {
-    /// body.sbm.
-    pub body: Vec<u8>,
-    /// joints.jfor.
-    pub joints: Vec<u8>,
-    /// shape.ssm.
-    pub shape: Vec<u8>,
-}
-
-impl ModelBytes {
-    /// Read the three files from `dir`.
-    pub fn load(dir: &Path) -> Result<Self> {
-        let read = |name: &str| {
-            let p = dir.join(name);
-            std::fs::read(&p).with_context(|| format!("reading model {}", p.display()))
-        };
-        Ok(ModelBytes {
-            body: read("body.sbm")?,
-            joints: read("joints.jfor")?,
-            shape: read("shape.ssm")?,
-        })
-    }
-
-    /// Parsed views.
-    pub fn views(&self) -> Result<Models<'_>> {
-        Ok(Models {
-            body: BodyModelView::parse(&self.body).context("body.sbm")?,
-            joints: ForestView::parse(&self.joints).context("joints.jfor")?,
-            shape: ShapeModelView::parse(&self.shape).context("shape.ssm")?,
-        })
-    }
-}
-
-/// Owned scratch for a tracker (allocated once, before the first frame).
-pub struct ScratchStore {
-    plane_points: Vec<Point3>,
-    plane_labels: Vec<u8>,
-    canonical: Vec<f32>,
-    fit_points: Vec<[f32; 3]>,
-    fit_normals: Vec<[f32; 3]>,
-    torso_vertices: Vec<Point3>,
-    torso_normals: Vec<Vector3>,
-    torso_regions: Vec<BodyRegion>,
-    forest: Box<Workspace>,
-}
-
-impl ScratchStore {
-    /// Buffers of the sizes `sizes` asks for.
-    pub fn new(sizes: &ScratchSizes) -> Self {
-        ScratchStore {
-            plane_points: vec![Point3::origin(); sizes.plane_points],
-            plane_labels: vec![0; sizes.plane_points],
-            canonical: vec![0.0; sizes.canonical],
-            fit_points: vec![[0.0; 3]; sizes.torso],
-            fit_normals: vec![[0.0; 3]; sizes.torso],
-            torso_vertices: vec![Point3::origin(); sizes.torso],
-            torso_normals: vec![Vector3::zeros(); sizes.torso],
-            torso_regions: vec![BodyRegion::OffBody; sizes.torso],
-            forest: Box::new(Workspace::new()),
-        }
-    }
-
-    /// The tracker's view of the buffers.
-    pub fn scratch(&mut self) -> Scratch<'_> {
-        Scratch {
-            plane_points: &mut self.plane_points,
-            plane_labels: &mut self.plane_labels,
-            canonical: &mut self.canonical,
-            fit_points: &mut self.fit_points,
-            fit_normals: &mut self.fit_normals,
-            torso_vertices: &mut self.torso_vertices,
-            torso_normals: &mut self.torso_normals,
-            torso_regions: &mut self.torso_regions,
-            forest: &mut self.forest,
-        }
-    }
 }
 
 /// A 4x4 row-major rigid transform as an isometry.
@@ -321,7 +238,7 @@ pub fn run_variant(
         cfg.known_shape = Some(z);
     }
     let sizes = ScratchSizes::of(models, &k, &cfg.planes);
-    let mut store = ScratchStore::new(&sizes);
+    let mut store = TrackerScratch::new(&sizes);
     let mut tracker = Tracker::new(*models, k, cfg, store.scratch())?;
     let oni = seq.dir.join("sequence.oni");
     let mut reader = OniReader::open(&oni).with_context(|| format!("opening {}", oni.display()))?;
@@ -499,7 +416,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         .models
         .clone()
         .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts"));
-    let bytes = ModelBytes::load(&model_dir)?;
+    let bytes = ModelFiles::load(&model_dir)?;
     let models = bytes.views()?;
     let mut per_variant: Vec<(Variant, Vec<Value>)> = wanted.iter().map(|v| (*v, Vec::new())).collect();
     let mut sequences = Vec::new();

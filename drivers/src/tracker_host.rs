@@ -1,0 +1,128 @@
+//! The tracker's host side: its three model files read and validated once at start-up ([`ModelFiles`]) and its
+//! working memory allocated once, before the first frame ([`TrackerScratch`]), for every program that runs
+//! `supine_core::tracker` (the service, replay, the demo, the evaluation). Nothing here runs per frame.
+
+use std::path::{Path, PathBuf};
+use supine_core::body_model::BodyModelView;
+use supine_core::forest::infer::Workspace;
+use supine_core::forest::model::ForestView;
+use supine_core::geometry::{Point3, Vector3};
+use supine_core::model_file::ModelFileError;
+use supine_core::shape::ShapeModelView;
+use supine_core::tracker::{Models, Scratch, ScratchSizes};
+use supine_core::wire::BodyRegion;
+
+/// File names of the three models in a model directory.
+pub const MODEL_FILES: [&str; 3] = ["body.sbm", "joints.jfor", "shape.ssm"];
+
+/// Why the model files could not be loaded: which file, and what was wrong with it.
+#[derive(Debug)]
+pub struct ModelLoadError {
+    /// The file.
+    pub path: PathBuf,
+    /// What went wrong (the OS error, or core's validation error).
+    pub reason: String,
+}
+
+impl std::fmt::Display for ModelLoadError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "model file {}: {}", self.path.display(), self.reason)
+    }
+}
+
+impl std::error::Error for ModelLoadError {}
+
+/// The three model files, read once and validated.
+pub struct ModelFiles {
+    /// The body model (body.sbm).
+    pub body: Vec<u8>,
+    /// The joint forest (joints.jfor).
+    pub joints: Vec<u8>,
+    /// The shape model (shape.ssm).
+    pub shape: Vec<u8>,
+}
+
+impl ModelFiles {
+    /// Read the three files ([`MODEL_FILES`]) from `dir`.
+    pub fn load(dir: &Path) -> Result<Self, ModelLoadError> {
+        let [b, j, s] = MODEL_FILES.map(|n| dir.join(n));
+        Self::load_files(&b, &j, &s)
+    }
+
+    /// Read the three files from their paths and check that each parses as its kind.
+    pub fn load_files(body: &Path, joints: &Path, shape: &Path) -> Result<Self, ModelLoadError> {
+        let read = |p: &Path| {
+            std::fs::read(p).map_err(|e| ModelLoadError {
+                path: p.to_path_buf(),
+                reason: e.to_string(),
+            })
+        };
+        let files = ModelFiles {
+            body: read(body)?,
+            joints: read(joints)?,
+            shape: read(shape)?,
+        };
+        let bad = |p: &Path, e: ModelFileError| ModelLoadError {
+            path: p.to_path_buf(),
+            reason: e.to_string(),
+        };
+        BodyModelView::parse(&files.body).map_err(|e| bad(body, e))?;
+        ForestView::parse(&files.joints).map_err(|e| bad(joints, e))?;
+        ShapeModelView::parse(&files.shape).map_err(|e| bad(shape, e))?;
+        Ok(files)
+    }
+
+    /// The validated views the tracker reads.
+    pub fn views(&self) -> Result<Models<'_>, ModelFileError> {
+        Ok(Models {
+            body: BodyModelView::parse(&self.body)?,
+            joints: ForestView::parse(&self.joints)?,
+            shape: ShapeModelView::parse(&self.shape)?,
+        })
+    }
+}
+
+/// Owned scratch for a tracker (allocated once, before the first frame).
+pub struct TrackerScratch {
+    plane_points: Vec<Point3>,
+    plane_labels: Vec<u8>,
+    canonical: Vec<f32>,
+    fit_points: Vec<[f32; 3]>,
+    fit_normals: Vec<[f32; 3]>,
+    torso_vertices: Vec<Point3>,
+    torso_normals: Vec<Vector3>,
+    torso_regions: Vec<BodyRegion>,
+    forest: Box<Workspace>,
+}
+
+impl TrackerScratch {
+    /// Buffers of the sizes `sizes` asks for.
+    pub fn new(sizes: &ScratchSizes) -> Self {
+        TrackerScratch {
+            plane_points: vec![Point3::origin(); sizes.plane_points],
+            plane_labels: vec![0; sizes.plane_points],
+            canonical: vec![0.0; sizes.canonical],
+            fit_points: vec![[0.0; 3]; sizes.torso],
+            fit_normals: vec![[0.0; 3]; sizes.torso],
+            torso_vertices: vec![Point3::origin(); sizes.torso],
+            torso_normals: vec![Vector3::zeros(); sizes.torso],
+            torso_regions: vec![BodyRegion::OffBody; sizes.torso],
+            forest: Box::new(Workspace::new()),
+        }
+    }
+
+    /// The tracker's view of the buffers.
+    pub fn scratch(&mut self) -> Scratch<'_> {
+        Scratch {
+            plane_points: &mut self.plane_points,
+            plane_labels: &mut self.plane_labels,
+            canonical: &mut self.canonical,
+            fit_points: &mut self.fit_points,
+            fit_normals: &mut self.fit_normals,
+            torso_vertices: &mut self.torso_vertices,
+            torso_normals: &mut self.torso_normals,
+            torso_regions: &mut self.torso_regions,
+            forest: &mut self.forest,
+        }
+    }
+}
