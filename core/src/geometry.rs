@@ -66,6 +66,18 @@ impl Plane {
     }
 }
 
+/// A rigid transform from a 4x4 row-major matrix (the JSON form of truth and config files); the rotation block is
+/// taken as given (orthonormalised through the quaternion).
+pub fn isometry_from_rows(m: &[[f32; 4]; 4]) -> Isometry3 {
+    let r = Matrix3::new(
+        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+    );
+    Isometry3::from_parts(
+        Translation3::new(m[0][3], m[1][3], m[2][3]),
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -3,12 +3,14 @@
 //! `supine_core::tracker` (the service, replay, the demo, the evaluation). Nothing here runs per frame.
 
 use std::path::{Path, PathBuf};
-use supine_core::body_model::BodyModelView;
+use supine_core::body_model::{BodyModelView, SHAPE_COMPONENTS};
+use supine_core::error::BufferLenError;
 use supine_core::forest::infer::Workspace;
 use supine_core::forest::model::ForestView;
-use supine_core::geometry::{Point3, Vector3};
+use supine_core::geometry::{Isometry3, Point3, Vector3};
 use supine_core::model_file::ModelFileError;
 use supine_core::shape::ShapeModelView;
+use supine_core::torso::{TorsoBuffers, TorsoSurface};
 use supine_core::tracker::{Models, Scratch, ScratchSizes};
 use supine_core::wire::BodyRegion;
 
@@ -124,5 +126,52 @@ impl TrackerScratch {
             torso_regions: &mut self.torso_regions,
             forest: &mut self.forest,
         }
+    }
+}
+
+/// A shaped torso surface in owned buffers (the true torso of a sequence, for scoring).
+pub struct OwnedTorso {
+    vertices: Vec<Point3>,
+    normals: Vec<Vector3>,
+    regions: Vec<BodyRegion>,
+    body_from_torso: Isometry3,
+}
+
+impl OwnedTorso {
+    /// The body model's torso subset shaped with `shape_sigma` (σ units; missing coefficients are 0).
+    pub fn new(body: &BodyModelView<'_>, shape_sigma: &[f32]) -> Result<Self, BufferLenError> {
+        let n = body.counts().subset;
+        let mut raw = [0.0f32; SHAPE_COMPONENTS];
+        for (i, r) in raw.iter_mut().enumerate() {
+            *r = shape_sigma.get(i).copied().unwrap_or(0.0) * body.sigma(i);
+        }
+        let mut t = OwnedTorso {
+            vertices: vec![Point3::origin(); n],
+            normals: vec![Vector3::zeros(); n],
+            regions: vec![BodyRegion::OffBody; n],
+            body_from_torso: Isometry3::identity(),
+        };
+        let s = TorsoSurface::build(
+            body,
+            &raw,
+            TorsoBuffers {
+                vertices: &mut t.vertices,
+                normals: &mut t.normals,
+                regions: &mut t.regions,
+            },
+        )?;
+        t.body_from_torso = s.body_from_torso();
+        Ok(t)
+    }
+
+    /// The surface view (`None` for a body model other than the one it was built from).
+    pub fn surface<'a>(&'a self, body: &BodyModelView<'a>) -> Option<TorsoSurface<'a>> {
+        TorsoSurface::from_parts(
+            body,
+            &self.vertices,
+            &self.normals,
+            &self.regions,
+            self.body_from_torso,
+        )
     }
 }

@@ -1,29 +1,26 @@
-//! `supine demo`: the README's main job, on the committed synthetic recording.
-//!
-//! Today supine has its foundations (depth sources, the wire protocol, the links) but no tracker yet: the joint
-//! forest, shape estimation and ICP land with the tracker issues. So the demo runs the stages that exist, end to end
-//! and for real: the recording is read through the same `DepthSource` as a live Kinect, each frame is checked
-//! (valid-depth fraction inside the Kinect's working range), a health message saying `initialising` is encoded with
-//! the frame's capture timestamp and sent through the chosen link, and the table reports the latency of those
-//! stages. It says plainly that no pose is estimated; it never prints an accuracy it did not measure.
+//! `supine demo`: the README's main job. The committed synthetic recording (2 s, a patient on a bed, the robot arm
+//! sweeping its probe over the torso) runs through the whole pipeline with the committed default models: the same
+//! `DepthSource` a live Kinect uses, the real-time tracker (init phase, joint forest, torso ICP with feedback, probe
+//! mapping), packets encoded and sent through the chosen link. A live status line, then a table: latency, the
+//! states, and accuracy against the recording's ground truth (truth.jsonl beside it), measured, never assumed.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use supine_core::wire::{Body, Health, Message, TrackerState};
+use supine_core::geometry::Isometry3;
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
-use supine_drivers::source::{self, DepthSource, SourceErrorKind, SourceSpec};
+use supine_drivers::source::{self, DepthSource, SourceSpec};
+use supine_drivers::tracker_host::{MODEL_FILES, ModelFiles};
 
 use crate::failure::Failure;
 use crate::output::{self, Output};
+use crate::pipeline::{self, PlayOptions};
+use crate::truth::Truth;
 use crate::{note, note_raw};
 
 /// Where the committed demo recording lives, relative to the repository root or the installed model directory.
 const DEMO_RECORDING: &str = "demo/sequence.oni";
-
-/// Depth range in which a Kinect v1 measures (mm); outside it a pixel carries no usable depth.
-const WORKING_RANGE_MM: std::ops::RangeInclusive<u16> = 500..=4500;
 
 /// Arguments of `supine demo`.
 #[derive(Args)]
@@ -58,13 +55,22 @@ fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
     })
 }
 
-/// Latency percentile (0..=100) of sorted durations, in milliseconds.
-fn percentile_ms(sorted: &[Duration], p: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = ((p / 100.0) * (sorted.len() - 1) as f64).round() as usize;
-    sorted[rank.min(sorted.len() - 1)].as_secs_f64() * 1e3
+/// The first model directory holding all three default models.
+fn find_models() -> Result<PathBuf, Failure> {
+    let dirs = crate::model_dirs::model_dirs();
+    dirs.iter()
+        .find(|d| MODEL_FILES.iter().all(|f| d.join(f).is_file()))
+        .cloned()
+        .ok_or_else(|| {
+            let tried: Vec<String> = dirs.iter().map(|d| d.display().to_string()).collect();
+            anyhow::anyhow!(
+                "no directory with the model files {} found (tried {}); run from the repository root or set \
+                 SUPINE_MODELS",
+                MODEL_FILES.join(", "),
+                tried.join(", ")
+            )
+            .into()
+        })
 }
 
 /// Run `supine demo`.
@@ -108,56 +114,45 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         Some(spec) => Some(link::open(spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("{e}"))?),
     };
     note!("supine demo: {}", src.describe());
-    note!(
-        "supine demo: the tracker (joint forest, shape estimation, ICP) is not built yet; this run exercises the\n\
-         \x20            depth source, frame checks and the wire/link path, and reports the tracker as initialising."
-    );
-
-    let limit = args.frames.unwrap_or(u32::MAX);
-    let mut latencies = Vec::new();
-    let mut valid_fraction_sum = 0.0f64;
-    let mut bytes_encoded = 0usize;
-    let mut send_errors = 0u64;
-    let mut serial_buf = [0u8; supine_core::wire::serial::MAX_WIRE_LEN];
-    let mut seq = 0u16;
+    let model_dir = find_models()?;
+    let files = ModelFiles::load(&model_dir).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let truth_path = path.with_file_name("truth.jsonl");
+    let truth = if truth_path.is_file() {
+        Some(Truth::load(&truth_path).map_err(|e| anyhow::anyhow!("{e:#}"))?)
+    } else {
+        note!("supine demo: no truth.jsonl beside the recording; accuracy is not measured");
+        None
+    };
+    let robot_base_from_camera = truth
+        .as_ref()
+        .map(|t| t.robot_base_from_camera)
+        .unwrap_or_else(Isometry3::identity);
+    let opts = PlayOptions {
+        limit: args.frames.unwrap_or(u32::MAX),
+        truth: truth.as_ref(),
+        tracker: pipeline::tracker_config(robot_base_from_camera),
+    };
     let started = Instant::now();
-    while (latencies.len() as u32) < limit {
-        let t0 = Instant::now();
-        let frame = match src.next_frame(Duration::from_millis(500)) {
-            Ok(f) => f,
-            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
-            Err(e) => return Err(anyhow::anyhow!("reading {}: {e}", path.display()).into()),
-        };
-        let depth = frame.depth_mm();
-        let valid = depth.iter().filter(|d| WORKING_RANGE_MM.contains(d)).count();
-        valid_fraction_sum += valid as f64 / depth.len() as f64;
-        let timestamp = frame.capture;
-        let msg = Message {
-            seq,
-            timestamp,
-            body: Body::Health(Health {
-                state: TrackerState::Initialising,
-                frame_rate_chz: 0,
-                latency_us: 0,
-                budget_overruns: 0,
-                dropped_frames: 0,
-            }),
-        };
-        seq = seq.wrapping_add(1);
-        match msg.encode_serial(&mut serial_buf) {
-            Ok(n) => bytes_encoded += n,
-            Err(e) => return Err(anyhow::anyhow!("encoding a health message: {e}").into()),
+    let link: Option<&mut dyn Link> = match sink.as_mut() {
+        Some(l) => Some(l.as_mut()),
+        None => None,
+    };
+    let stats = pipeline::play(src.as_mut(), &files, &opts, link, |v, s| {
+        if s.frames % 10 == 0 || s.frames == 1 {
+            let err = s
+                .torso_mm
+                .last()
+                .map(|e| format!("{e:5.1} mm"))
+                .unwrap_or_else(|| "   -    ".into());
+            note_raw!(
+                "\rsupine demo: frame {:>4}  {:<12}  {:>5.2} ms  torso error {err}   ",
+                s.frames,
+                v.report.state.name(),
+                v.report.times.total() as f64 / 1000.0,
+            );
         }
-        if let Some(link) = sink.as_mut()
-            && link.send(&msg).is_err()
-        {
-            send_errors += 1;
-        }
-        latencies.push(t0.elapsed());
-        if latencies.len() % 30 == 0 {
-            note_raw!("\rsupine demo: {} frames", latencies.len());
-        }
-    }
+    })
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
     note!();
     // Messages a full link queue evicted (newest wins): a replay runs faster than a slow line can carry.
     let mut dropped = 0u64;
@@ -182,36 +177,62 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             sink_failure = Some(format!("--sink {}: {e}", link.describe()));
         }
     }
-    let frames = latencies.len();
-    if frames == 0 {
+    if stats.frames == 0 {
         return Err(anyhow::anyhow!("{} holds no frames", path.display()).into());
     }
     let wall = started.elapsed().as_secs_f64();
-    latencies.sort();
-    let p50 = percentile_ms(&latencies, 50.0);
-    let p99 = percentile_ms(&latencies, 99.0);
-    let valid_mean = valid_fraction_sum / frames as f64;
+    let p50 = pipeline::percentile(&stats.latency_us, 50.0) / 1000.0;
+    let p99 = pipeline::percentile(&stats.latency_us, 99.0) / 1000.0;
+    let mm = |v: &[f32]| {
+        let m = pipeline::mean(v);
+        if m.is_finite() {
+            format!("{m:.1} mm (over {} frames)", v.len())
+        } else {
+            "n/a".to_owned()
+        }
+    };
 
     // With `--sink stdout` the packets own stdout; the table goes to stderr so neither corrupts the other.
     let mut table = String::new();
     let mut row = |name: &str, value: String| table.push_str(&format!("  {name:<34} {value}\n"));
     row("recording", path.display().to_string());
-    row("frames", frames.to_string());
-    row("throughput (frames/s)", format!("{:.1}", frames as f64 / wall));
+    row("models", model_dir.display().to_string());
+    row("frames", stats.frames.to_string());
+    row(
+        "throughput (frames/s)",
+        format!("{:.1}", stats.frames as f64 / wall),
+    );
     row("latency p50 / p99 (ms)", format!("{p50:.3} / {p99:.3}"));
-    row("valid depth in 0.5-4.5 m", format!("{:.1} %", valid_mean * 100.0));
-    row("health packets encoded", format!("{frames} ({bytes_encoded} B)"));
+    row(
+        "init phase",
+        match stats.init_frames {
+            Some(n) => format!("{n} frames ({:.2} s of sensor time)", n as f64 / 30.0),
+            None => "not finished".to_owned(),
+        },
+    );
+    row("states (frames)", stats.states_line());
+    row(
+        "tracked after init",
+        format!("{:.1} %", stats.tracked_fraction() * 100.0),
+    );
+    row("torso surface error", mm(&stats.torso_mm));
+    row("salient-point error", mm(&stats.point_mm));
+    row("probe mapping error", mm(&stats.probe_mm));
+    row("probe distance error", mm(&stats.probe_distance_mm));
+    row("budget overruns", stats.budget_overruns.to_string());
+    row(
+        "packets",
+        format!("{} ({} B on a serial line)", stats.packets, stats.serial_bytes),
+    );
     if let Some(s) = &args.sink {
         row(
             "sent to",
-            format!("{s} ({send_errors} send errors, {dropped} dropped by the link queue)"),
+            format!(
+                "{s} ({} send errors, {dropped} dropped by the link queue)",
+                stats.send_errors
+            ),
         );
     }
-    row("tracker", "not built yet: no pose is estimated".to_owned());
-    row(
-        "accuracy vs ground truth",
-        "n/a until the tracker lands".to_owned(),
-    );
     if args.sink.as_deref() == Some("stdout") {
         note_raw!("supine demo summary\n{table}");
     } else {
@@ -223,17 +244,9 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         return Err(anyhow::anyhow!(msg).into());
     }
     if let Some(out) = json_out {
-        let report = serde_json::json!({
-            "frames": frames,
-            "latency_ms_p50": p50,
-            "latency_ms_p99": p99,
-            "valid_depth_fraction": valid_mean,
-            "packets_dropped": dropped,
-            "send_errors": send_errors,
-            "tracked_fraction": serde_json::Value::Null,
-            "tracker": "not built",
-            "recording": path.display().to_string(),
-        });
+        let mut report = stats.json();
+        report["packets_dropped"] = dropped.into();
+        report["recording"] = path.display().to_string().into();
         let text = serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?;
         output::write_all(out, text.as_bytes())?;
     }

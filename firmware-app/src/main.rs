@@ -16,8 +16,10 @@ mod models;
 mod notify;
 mod numbers;
 mod output;
+mod pipeline;
 mod record;
 mod run;
+mod truth;
 mod wire;
 
 use clap::{Parser, Subcommand};

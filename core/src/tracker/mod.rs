@@ -19,6 +19,7 @@
 //! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
 //! (20-40 µs each), probe mapping (tens of µs) and five packets.
 
+pub mod accuracy;
 pub mod budget;
 pub mod state;
 pub mod torso_icp;

@@ -3,14 +3,9 @@
 //! score it against the ground truth, frame by frame.
 //!
 //! Figures (JSON keys in shared/design/cli.md):
-//! - torso surface error: mean distance between each vertex of the tracked, shaped torso model and the same vertex of
-//!   the true torso (the body model torso subset with the patient's true shape, placed by the true torso pose), mm.
-//!   Vertex to vertex is stricter than point to surface: it also counts sliding along the skin.
-//! - salient-point error: the six points the tracker reports against the true ones, mm.
-//! - probe mapping: the arm state (the true probe tip in `robot_base`, or `DIR/arm.jsonl` when present) mapped
-//!   through the tracker's pose onto its torso model, against the same tip mapped through the true pose onto the
-//!   true torso: the nearest points' distance (camera frame) and the signed-distance difference, mm, over frames
-//!   whose true tip lies within 5 cm of the skin (where mapping matters).
+//! - torso surface, salient-point and probe-mapping errors as `supine_core::tracker::accuracy` defines them; the
+//!   true torso is the body model's torso subset with the patient's true shape placed by the true torso pose, the
+//!   arm tip the true probe tip in `robot_base`.
 //! - tracked fraction: frames after the init phase whose state carries a pose.
 //! - latency: per-frame processing time on this machine (one thread), p50 and p99.
 //!
@@ -20,17 +15,16 @@ use anyhow::{Context, Result, bail, ensure};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
-use supine_core::body_model::{BodyModelView, SHAPE_COMPONENTS};
+use supine_core::body_model::SHAPE_COMPONENTS;
 use supine_core::camera::Intrinsics;
-use supine_core::geometry::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use supine_core::probe;
-use supine_core::torso::{TorsoBuffers, TorsoSurface};
+use supine_core::geometry::{Isometry3, Point3, Vector3};
+use supine_core::tracker::accuracy::{self, TrackedFrame, TruthFrame};
 use supine_core::tracker::{ArmSample, FrameReport, Models, ScratchSizes, Tracker, TrackerConfig, Variant};
-use supine_core::wire::{BodyRegion, TrackerState};
+use supine_core::wire::TrackerState;
 use supine_drivers::SourceErrorKind;
 use supine_drivers::clock::MonotonicClock;
 use supine_drivers::oni::OniReader;
-use supine_drivers::tracker_host::{ModelFiles, TrackerScratch};
+use supine_drivers::tracker_host::{ModelFiles, OwnedTorso, TrackerScratch};
 
 use crate::sequence::{FrameTruth, SequenceMeta};
 
@@ -59,15 +53,7 @@ pub struct TrackingEvalArgs {
 }
 
 /// A 4x4 row-major rigid transform as an isometry.
-pub fn isometry_of(m: &[[f32; 4]; 4]) -> Isometry3 {
-    let r = Matrix3::new(
-        m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
-    );
-    Isometry3::from_parts(
-        Translation3::new(m[0][3], m[1][3], m[2][3]),
-        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(r)),
-    )
-}
+pub use supine_core::geometry::isometry_from_rows as isometry_of;
 
 /// One generated sequence as the evaluation reads it.
 pub struct SequenceData {
@@ -133,53 +119,6 @@ pub fn sequence_dirs(data: &Path) -> Result<Vec<PathBuf>> {
     Ok(dirs)
 }
 
-/// The true torso surface of a sequence's patient (torso frame), in owned buffers.
-pub struct TrueTorso {
-    vertices: Vec<Point3>,
-    normals: Vec<Vector3>,
-    regions: Vec<BodyRegion>,
-    body_from_torso: Isometry3,
-}
-
-impl TrueTorso {
-    /// Shape the body model's torso subset with the patient's coefficients (σ units).
-    pub fn new(body: &BodyModelView<'_>, shape_sigma: &[f32]) -> Result<Self> {
-        let n = body.counts().subset;
-        let mut raw = [0.0f32; SHAPE_COMPONENTS];
-        for (i, r) in raw.iter_mut().enumerate() {
-            *r = shape_sigma.get(i).copied().unwrap_or(0.0) * body.sigma(i);
-        }
-        let mut t = TrueTorso {
-            vertices: vec![Point3::origin(); n],
-            normals: vec![Vector3::zeros(); n],
-            regions: vec![BodyRegion::OffBody; n],
-            body_from_torso: Isometry3::identity(),
-        };
-        let s = TorsoSurface::build(
-            body,
-            &raw,
-            TorsoBuffers {
-                vertices: &mut t.vertices,
-                normals: &mut t.normals,
-                regions: &mut t.regions,
-            },
-        )?;
-        t.body_from_torso = s.body_from_torso();
-        Ok(t)
-    }
-
-    /// The surface view.
-    pub fn surface<'a>(&'a self, body: &BodyModelView<'a>) -> Option<TorsoSurface<'a>> {
-        TorsoSurface::from_parts(
-            body,
-            &self.vertices,
-            &self.normals,
-            &self.regions,
-            self.body_from_torso,
-        )
-    }
-}
-
 /// Per-frame scores of one variant.
 #[derive(Debug, Clone, Default, serde::Serialize)]
 pub struct FrameScore {
@@ -220,7 +159,7 @@ pub fn run_variant(
     models: &Models<'_>,
     seq: &SequenceData,
     variant: Variant,
-    truth_torso: &TrueTorso,
+    truth_torso: &OwnedTorso,
     true_shape: bool,
 ) -> Result<(Vec<FrameScore>, Value)> {
     let k = Intrinsics::KINECT_V1;
@@ -274,33 +213,25 @@ pub fn run_variant(
             occluded: t.torso_occluded_fraction,
             ..FrameScore::default()
         };
-        let camera_from_true = isometry_of(&t.camera_from_torso);
         if let (Some(pose), Some(surface)) = (r.camera_from_torso, tracker.surface()) {
-            s.torso_mm = mean(
-                surface
-                    .vertices()
-                    .iter()
-                    .zip(true_surface.vertices())
-                    .map(|(e, g)| (pose * e - camera_from_true * g).norm() * 1000.0),
-            );
-            if let Some(points) = r.salient_camera {
-                s.point_mm = mean(
-                    points
-                        .iter()
-                        .zip(&t.salient_camera)
-                        .map(|(p, g)| (p - Point3::from(*g)).norm() * 1000.0),
-                );
-            }
-            if let (Some(m), Some(a)) = (r.probe, arm.as_ref()) {
-                let tip =
-                    probe::tip_in_torso(&a.tip_robot_base, &cfg.robot_base_from_camera, &camera_from_true);
-                if let Some(g) = probe::map_tip(&true_surface, &tip)
-                    && g.signed_distance.abs() < 0.05
-                {
-                    s.probe_mm = Some((pose * m.nearest - camera_from_true * g.nearest).norm() * 1000.0);
-                    s.probe_distance_mm = Some((m.signed_distance - g.signed_distance).abs() * 1000.0);
-                }
-            }
+            let truth = TruthFrame {
+                surface: &true_surface,
+                camera_from_torso: isometry_of(&t.camera_from_torso),
+                salient_camera: t.salient_camera.map(Point3::from),
+            };
+            let tracked = TrackedFrame {
+                surface: &surface,
+                camera_from_torso: pose,
+                salient_camera: r.salient_camera,
+            };
+            let tip = arm
+                .as_ref()
+                .map(|a| (&a.tip_robot_base, &cfg.robot_base_from_camera));
+            let a = accuracy::score(&tracked, &truth, tip);
+            s.torso_mm = Some(a.torso_m * 1000.0);
+            s.point_mm = a.point_m.map(|e| e * 1000.0);
+            s.probe_mm = a.probe_m.map(|e| e * 1000.0);
+            s.probe_distance_mm = a.probe_distance_m.map(|e| e * 1000.0);
         }
         scores.push(s);
         i += 1;
@@ -422,7 +353,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
     let mut sequences = Vec::new();
     for dir in &dirs {
         let seq = SequenceData::load(dir)?;
-        let truth_torso = TrueTorso::new(&models.body, &seq.meta.shape)?;
+        let truth_torso = OwnedTorso::new(&models.body, &seq.meta.shape)?;
         let mut per_seq = serde_json::Map::new();
         let mut plots = Vec::new();
         for (variant, acc) in per_variant.iter_mut() {
