@@ -145,7 +145,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
                 .map(|e| format!("{e:5.1} mm"))
                 .unwrap_or_else(|| "   -    ".into());
             note_raw!(
-                "\rsupine demo: frame {:>4}  {:<12}  {:>5.2} ms  torso error {err}   ",
+                "\rsupine demo: frame {:>4}  {:<12}  {:>5.2} ms  torso vs truth {err}   ",
                 s.frames,
                 v.report.state.name(),
                 v.report.times.total() as f64 / 1000.0,
