@@ -19,6 +19,7 @@ mod output;
 mod pipeline;
 mod record;
 mod run;
+mod service;
 mod truth;
 mod wire;
 
@@ -42,7 +43,8 @@ struct Cli {
 enum Command {
     /// The main job on the committed synthetic recording: the whole pipeline as far as it is built, then a table.
     Demo(demo::DemoArgs),
-    /// The service: validate its configuration (`--check-config`); the real-time loop lands with the tracker.
+    /// The service: the real-time tracker from the configured source to the configured link (`--check-config`
+    /// validates a configuration and exits).
     Run(run::RunArgs),
     /// Camera-to-robot extrinsic from arm states paired with the probe tip seen in depth (or from recorded pairs).
     Calibrate(calibrate::CalibrateArgs),

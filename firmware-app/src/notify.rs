@@ -10,10 +10,6 @@
 //! The socket is opened once at start-up; [`Notifier::watchdog`] then sends a fixed datagram without allocating,
 //! so the frame loop can call it (every frame, or every few frames within [`watchdog_interval`] / 2).
 
-// The service command `supine run` (the tracker issue) is the caller; until it lands only the tests use parts of
-// this. Remove the allow when it does.
-#![allow(dead_code)]
-
 use std::ffi::{OsStr, OsString};
 use std::io;
 use std::os::linux::net::SocketAddrExt;

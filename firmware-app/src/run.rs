@@ -1,6 +1,6 @@
-//! `supine run`: the service on the head computer. Today it validates its configuration (`--check-config`): every
-//! key, the source and link strings, and the model files it names (present, of the right kind, and valid as core
-//! loads them). The real-time loop itself lands with the tracker; until then `--config` says so and exits 1.
+//! `supine run`: the service on the head computer. `--check-config` validates its configuration: every key, the
+//! source and link strings, and the model files it names (present, of the right kind, and valid as core loads
+//! them). `--config` validates the same way, then runs the service loop (`crate::service`).
 
 use std::path::PathBuf;
 
@@ -28,13 +28,18 @@ pub fn run(args: RunArgs) -> Result<(), Failure> {
         return Ok(());
     }
     let path = args.config.unwrap_or_default();
-    check(&path)?;
-    Err(anyhow::anyhow!(
-        "{}: the configuration is valid, but the real-time tracker is not built yet (it lands with the tracker \
-         issue); `supine run --check-config FILE` validates a file",
-        path.display()
-    )
-    .into())
+    let checked = check(&path)?;
+    let stats = crate::service::serve(&checked)?;
+    crate::note!(
+        "supine run: {} frames, {} sensor faults ({} reopens), {} arm states, {} commands, {} send errors",
+        stats.frames,
+        stats.source_faults,
+        stats.reopens,
+        stats.arm_states,
+        stats.commands,
+        stats.send_errors
+    );
+    Ok(())
 }
 
 /// Parse the file and check the model files it names; a bad file or model is a usage error (exit 2).

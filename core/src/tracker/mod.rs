@@ -433,6 +433,11 @@ impl<'m, 's> Tracker<'m, 's> {
         )
     }
 
+    /// Use `shape` (σ units) instead of estimating one at the next init phase (`None`: estimate it).
+    pub fn set_known_shape(&mut self, shape: Option<[f32; SHAPE_COMPONENTS]>) {
+        self.cfg.known_shape = shape;
+    }
+
     /// Drop the track and run the init phase again (the re-initialise command).
     pub fn reinitialise(&mut self) {
         self.machine.reinitialise();

@@ -26,8 +26,10 @@ pub fn supine() -> Command {
         None => Command::new(exe),
     };
     // The committed default models, wherever the test runs from (scratch directories have no models/artifacts).
-    c.env_remove("SUPINE_LOG")
-        .env("SUPINE_MODELS", concat!(env!("CARGO_MANIFEST_DIR"), "/../models/artifacts"));
+    c.env_remove("SUPINE_LOG").env(
+        "SUPINE_MODELS",
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../models/artifacts"),
+    );
     c
 }
 
