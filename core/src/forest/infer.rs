@@ -37,6 +37,7 @@ pub struct PointEstimate {
 pub struct Workspace {
     samples: [SamplePixel; MAX_SAMPLES],
     leaves: [[u32; MAX_TREES]; MAX_SAMPLES],
+    order: [u16; MAX_SAMPLES],
     votes: VoteBuffer<MAX_VOTES>,
 }
 
@@ -57,6 +58,7 @@ impl Workspace {
                 p: [0.0; 3],
             }; MAX_SAMPLES],
             leaves: [[0; MAX_TREES]; MAX_SAMPLES],
+            order: [0; MAX_SAMPLES],
             votes: VoteBuffer::new(),
         }
     }
@@ -99,36 +101,75 @@ pub fn descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     }
 }
 
-/// The leaves all `trees` trees give the sample at (x, y) of depth `d_mm`, into `out[..trees]`: the trees are
-/// descended in lockstep, so their independent chains of node and depth loads overlap (same leaves as [`descend`]).
-#[inline]
-pub fn descend_all<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+/// Samples descended together by [`descend_samples`] (with the trees, up to `GROUP * MAX_TREES` load chains in flight).
+const GROUP: usize = 4;
+/// Rows per band of the descent order (samples of one band probe overlapping rows of the image).
+const BAND_ROWS: u16 = 8;
+/// Bands of a frame at most (480 rows; taller frames share the last band).
+const BANDS: usize = 64;
+
+/// Order of `samples` by 8-row band (a stable counting sort, O(n)): consecutive samples then probe nearby pixels and
+/// mostly take the same upper nodes, so the descent's depth and node loads hit the cache.
+fn band_order(samples: &[SamplePixel], order: &mut [u16]) {
+    let band = |s: &SamplePixel| ((s.y / BAND_ROWS) as usize).min(BANDS - 1);
+    let mut start = [0u16; BANDS + 1];
+    for s in samples {
+        start[band(s) + 1] += 1;
+    }
+    for b in 0..BANDS {
+        start[b + 1] += start[b];
+    }
+    for (i, s) in samples.iter().enumerate() {
+        let b = band(s);
+        order[start[b] as usize] = i as u16;
+        start[b] += 1;
+    }
+}
+
+/// The leaves of every sample in every tree (`leaves[i][..trees]` for `samples[i]`, the same leaves as [`descend`]):
+/// samples are taken in band order, [`GROUP`] at a time, and all their trees descended in lockstep, so that many
+/// independent chains of node and depth loads overlap.
+fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     model: &M,
     trees: usize,
     img: &D,
-    x: i32,
-    y: i32,
-    d_mm: u16,
-    out: &mut [u32; MAX_TREES],
+    samples: &[SamplePixel],
+    order: &mut [u16],
+    leaves: &mut [[u32; MAX_TREES]],
 ) {
-    let s = ProbeScale::new(d_mm);
     let trees = trees.min(MAX_TREES);
-    let mut at = [0u32; MAX_TREES];
-    let mut live = [false; MAX_TREES];
-    live[..trees].fill(true);
-    let mut left_to_do = trees;
-    while left_to_do > 0 {
-        for t in 0..trees {
-            if !live[t] {
-                continue;
-            }
-            match model.node(t, at[t]) {
-                Node::Leaf(l) => {
-                    out[t] = l;
-                    live[t] = false;
-                    left_to_do -= 1;
+    let order = &mut order[..samples.len()];
+    band_order(samples, order);
+    const LANES: usize = GROUP * MAX_TREES;
+    for group in order.chunks(GROUP) {
+        // Lane j: sample group[j / trees], tree j % trees.
+        let lanes = group.len() * trees;
+        let mut at = [0u32; LANES];
+        let mut live = [false; LANES];
+        let mut px = [(0i32, 0i32, ProbeScale::new(0)); GROUP];
+        for (g, &i) in group.iter().enumerate() {
+            let s = &samples[i as usize];
+            px[g] = (s.x as i32, s.y as i32, ProbeScale::new(s.d_mm));
+        }
+        live[..lanes].fill(true);
+        let mut left_to_do = lanes;
+        while left_to_do > 0 {
+            for j in 0..lanes {
+                if !live[j] {
+                    continue;
                 }
-                Node::Split { test, left } => at[t] = left + u32::from(!test.goes_left(img, x, y, s)),
+                let (g, t) = (j / trees, j % trees);
+                match model.node(t, at[j]) {
+                    Node::Leaf(l) => {
+                        leaves[group[g] as usize][t] = l;
+                        live[j] = false;
+                        left_to_do -= 1;
+                    }
+                    Node::Split { test, left } => {
+                        let (x, y, sc) = px[g];
+                        at[j] = left + u32::from(!test.goes_left(img, x, y, sc));
+                    }
+                }
             }
         }
     }
@@ -266,18 +307,14 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     let want = cfg.samples.min(MAX_SAMPLES);
     let n = sample_pixels(img, k, clip, cfg.seed, &mut ws.samples[..want]);
     let trees = model.tree_count().min(MAX_TREES);
-    for i in 0..n {
-        let s = ws.samples[i];
-        descend_all(
-            model,
-            trees,
-            img,
-            s.x as i32,
-            s.y as i32,
-            s.d_mm,
-            &mut ws.leaves[i],
-        );
-    }
+    descend_samples(
+        model,
+        trees,
+        img,
+        &ws.samples[..n],
+        &mut ws.order,
+        &mut ws.leaves[..n],
+    );
     let mut out = [None; P];
     let (samples, leaves, votes) = (&ws.samples[..n], &ws.leaves[..n], &mut ws.votes);
     for (point, slot) in out.iter_mut().enumerate() {
