@@ -110,7 +110,7 @@ impl<const N: usize> Default for VoteBuffer<N> {
 impl<const N: usize> VoteBuffer<N> {
     /// An empty buffer.
     pub const fn new() -> Self {
-        assert!(N % LANES == 0, "capacity must be a multiple of LANES");
+        assert!(N.is_multiple_of(LANES), "capacity must be a multiple of LANES");
         VoteBuffer {
             x: [0.0; N],
             y: [0.0; N],
