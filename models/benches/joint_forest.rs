@@ -2,12 +2,14 @@
 //! pixels, descending the trees, votes and the six mean-shifts, with the committed default forest
 //! (`models/artifacts/joints.jfor`) on views rendered here with the body model (seeded; the mannequin stands in
 //! when the body model artifact is missing). Run: `cargo bench -p supine-models --bench joint_forest`
-//! (criterion reports the median; pin one core with `taskset -c 0`).
+//! (criterion reports the median; pin one core with `taskset -c 0`; `SUPINE_JOINT_FOREST=FILE` times another forest). The `_cpu` variants time the same frames in
+//! the thread's CPU time (`/proc/thread-self/schedstat`, Linux), which a shared machine's load does not inflate.
 // criterion's macros define an undocumented `pub fn benches`.
 #![allow(missing_docs)]
 
 use criterion::{Criterion, criterion_group, criterion_main};
 use std::hint::black_box;
+use std::time::Duration;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
@@ -20,9 +22,18 @@ use supine_models::forest::data::{clip_for, view_planes};
 use supine_models::render::noise::KinectNoise;
 use supine_models::scene::model_body::{BodyKind, open_source};
 
+/// This thread's CPU time so far, if the kernel tells it (the yield makes the scheduler bring it up to date).
+fn thread_cpu() -> Option<Duration> {
+    std::thread::yield_now();
+    let s = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let ns: u64 = s.split_whitespace().next()?.parse().ok()?;
+    Some(Duration::from_nanos(ns))
+}
+
 fn bench(c: &mut Criterion) {
-    let bytes =
-        std::fs::read(default_path()).expect("the committed default forest models/artifacts/joints.jfor");
+    // SUPINE_JOINT_FOREST=FILE times another forest file (a candidate before it is committed).
+    let path = std::env::var_os("SUPINE_JOINT_FOREST").map_or_else(default_path, std::path::PathBuf::from);
+    let bytes = std::fs::read(&path).expect("the committed default forest models/artifacts/joints.jfor");
     let view = ForestView::parse(&bytes).expect("valid default forest");
     let dir = std::env::temp_dir().join(format!("supine-forest-bench-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
@@ -48,22 +59,34 @@ fn bench(c: &mut Criterion) {
     let k = Intrinsics::KINECT_V1;
     let mut ws = Box::new(Workspace::new());
     let none = [None; SalientPoint::COUNT];
+    let mut frame_i = 0u64;
+    let mut one = |method: Method| {
+        let (depth, planes) = &frames[(frame_i % frames.len() as u64) as usize];
+        let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
+        let clip = clip_for(planes, &k);
+        let cfg = InferConfig {
+            samples: view.samples_per_frame(),
+            seed: frame_i,
+            method,
+        };
+        frame_i += 1;
+        black_box(estimate(&view, &frame, &k, &clip, &cfg, &none, &mut ws));
+    };
     for (name, method) in [("refined", Method::Refined), ("baseline", Method::Baseline)] {
-        let mut i = 0u64;
         c.bench_function(&format!("joint_forest_frame_{name}_512"), |b| {
-            b.iter(|| {
-                let (depth, planes) = &frames[(i % frames.len() as u64) as usize];
-                let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
-                let clip = clip_for(planes, &k);
-                let cfg = InferConfig {
-                    samples: view.samples_per_frame(),
-                    seed: i,
-                    method,
-                };
-                i += 1;
-                black_box(estimate(&view, &frame, &k, &clip, &cfg, &none, &mut ws))
-            })
+            b.iter(|| one(method))
         });
+        if thread_cpu().is_some() {
+            c.bench_function(&format!("joint_forest_frame_{name}_512_cpu"), |b| {
+                b.iter_custom(|iters| {
+                    let t0 = thread_cpu().unwrap_or_default();
+                    for _ in 0..iters {
+                        one(method);
+                    }
+                    thread_cpu().unwrap_or_default().saturating_sub(t0)
+                })
+            });
+        }
     }
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -6,8 +6,11 @@ use std::path::PathBuf;
 use std::sync::OnceLock;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estimate, estimate_from_leaves};
+use supine_core::forest::meanshift::Vote;
 use supine_core::forest::model::{ForestModel, ForestView};
+use supine_core::forest::sample::sample_pixels;
+use supine_core::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES};
 
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
@@ -162,6 +165,59 @@ fn quantised_agrees_with_float_on_fixed_images() {
     let within = diffs.iter().filter(|&&d| d < 0.01).count() as f32 / diffs.len() as f32;
     assert!(median < 0.003, "median difference {median} m");
     assert!(within >= 0.7, "only {within} of estimates within 1 cm: {diffs:?}");
+}
+
+#[test]
+fn the_fast_frame_path_equals_the_reference_path() {
+    // `estimate` descends the trees in lockstep and runs the SIMD-layout mean-shift; tree by tree `descend` and
+    // `estimate_from_leaves` (what training validates with) must give the same estimates bit for bit.
+    let (a, side) = trained();
+    let v = ForestView::parse(a).unwrap();
+    let fl = FloatLeaves::parse(v, side).unwrap();
+    let ds = Dataset::open(dataset()).unwrap();
+    let k = Intrinsics::KINECT_V1;
+    let mut ws = Box::new(Workspace::new());
+    let mut votes = vec![Vote::default(); MAX_VOTES];
+    let mut compared = 0;
+    for &b in &ds.test {
+        let rec = ds.read_body(b).unwrap();
+        for view in &rec.views {
+            let full = view.full_depth(640, 480);
+            let frame = DepthFrame::new(&full, 640, 480, Timestamp::default(), 0).unwrap();
+            let planes = view_planes(&view.truth);
+            let clip = clip_for(&planes, &k);
+            let mut px = vec![Default::default(); 256];
+            let n = sample_pixels(&frame, &k, &clip, 9, &mut px);
+            assert!(n > 0 && n <= MAX_SAMPLES);
+            let none = [None; SalientPoint::COUNT];
+            for method in [Method::Refined, Method::Baseline] {
+                let cfg = InferConfig {
+                    samples: 256,
+                    seed: 9,
+                    method,
+                };
+                let fast = estimate(&v, &frame, &k, &clip, &cfg, &none, &mut ws);
+                let fast_float = estimate(&fl, &frame, &k, &clip, &cfg, &none, &mut ws);
+                for (model, fast) in [(&v as &dyn ForestModel, fast), (&fl, fast_float)] {
+                    let leaves: Vec<[u32; MAX_TREES]> = px[..n]
+                        .iter()
+                        .map(|s| {
+                            let mut row = [0; MAX_TREES];
+                            for (t, r) in row.iter_mut().enumerate().take(model.tree_count()) {
+                                *r = descend(model, t, &frame, s.x as i32, s.y as i32, s.d_mm);
+                            }
+                            row
+                        })
+                        .collect();
+                    let pos: Vec<[f32; 3]> = px[..n].iter().map(|s| s.p).collect();
+                    let slow = estimate_from_leaves(model, method, &pos, &leaves, &none, &mut votes);
+                    assert_eq!(fast, slow, "{method:?}");
+                    compared += 1;
+                }
+            }
+        }
+    }
+    assert!(compared >= 8, "{compared} frames compared");
 }
 
 #[test]

@@ -6,7 +6,7 @@
 
 use crate::camera::Intrinsics;
 use crate::forest::feature::{DepthImage, ProbeScale};
-use crate::forest::meanshift::{Prior, Vote, mean_shift};
+use crate::forest::meanshift::{Prior, Vote, VoteBuffer, mean_shift};
 use crate::forest::model::{ForestModel, Node};
 use crate::forest::sample::{Clip, SamplePixel, sample_pixels};
 use crate::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES, MODES};
@@ -33,11 +33,12 @@ pub struct PointEstimate {
     pub confidence: f32,
 }
 
-/// Working memory of one inference (about 150 KiB; keep one per tracker, e.g. in a static or a box).
+/// Working memory of one inference (about 170 KiB; keep one per tracker, e.g. in a static or a box).
 pub struct Workspace {
     samples: [SamplePixel; MAX_SAMPLES],
     leaves: [[u32; MAX_TREES]; MAX_SAMPLES],
-    votes: [Vote; MAX_VOTES],
+    order: [u16; MAX_SAMPLES],
+    votes: VoteBuffer<MAX_VOTES>,
 }
 
 impl Default for Workspace {
@@ -57,7 +58,8 @@ impl Workspace {
                 p: [0.0; 3],
             }; MAX_SAMPLES],
             leaves: [[0; MAX_TREES]; MAX_SAMPLES],
-            votes: [Vote { p: [0.0; 3], w: 0.0 }; MAX_VOTES],
+            order: [0; MAX_SAMPLES],
+            votes: VoteBuffer::new(),
         }
     }
 
@@ -93,12 +95,81 @@ pub fn descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     loop {
         match model.node(tree, i) {
             Node::Leaf(l) => return l,
-            Node::Split { test, left } => {
-                i = if test.goes_left(img, x, y, s) {
-                    left
-                } else {
-                    left + 1
-                };
+            // Branch-free child choice: the test's outcome is a coin flip the predictor cannot learn.
+            Node::Split { test, left } => i = left + u32::from(!test.goes_left(img, x, y, s)),
+        }
+    }
+}
+
+/// Samples descended together by [`descend_samples`] (with the trees, up to `GROUP * MAX_TREES` load chains in flight).
+const GROUP: usize = 4;
+/// Rows per band of the descent order (samples of one band probe overlapping rows of the image).
+const BAND_ROWS: u16 = 8;
+/// Bands of a frame at most (480 rows; taller frames share the last band).
+const BANDS: usize = 64;
+
+/// Order of `samples` by 8-row band (a stable counting sort, O(n)): consecutive samples then probe nearby pixels and
+/// mostly take the same upper nodes, so the descent's depth and node loads hit the cache.
+fn band_order(samples: &[SamplePixel], order: &mut [u16]) {
+    let band = |s: &SamplePixel| ((s.y / BAND_ROWS) as usize).min(BANDS - 1);
+    let mut start = [0u16; BANDS + 1];
+    for s in samples {
+        start[band(s) + 1] += 1;
+    }
+    for b in 0..BANDS {
+        start[b + 1] += start[b];
+    }
+    for (i, s) in samples.iter().enumerate() {
+        let b = band(s);
+        order[start[b] as usize] = i as u16;
+        start[b] += 1;
+    }
+}
+
+/// The leaves of every sample in every tree (`leaves[i][..trees]` for `samples[i]`, the same leaves as [`descend`]):
+/// samples are taken in band order, [`GROUP`] at a time, and all their trees descended in lockstep, so that many
+/// independent chains of node and depth loads overlap.
+fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    trees: usize,
+    img: &D,
+    samples: &[SamplePixel],
+    order: &mut [u16],
+    leaves: &mut [[u32; MAX_TREES]],
+) {
+    let trees = trees.min(MAX_TREES);
+    let order = &mut order[..samples.len()];
+    band_order(samples, order);
+    const LANES: usize = GROUP * MAX_TREES;
+    for group in order.chunks(GROUP) {
+        // Lane j: sample group[j / trees], tree j % trees.
+        let lanes = group.len() * trees;
+        let mut at = [0u32; LANES];
+        let mut live = [false; LANES];
+        let mut px = [(0i32, 0i32, ProbeScale::new(0)); GROUP];
+        for (g, &i) in group.iter().enumerate() {
+            let s = &samples[i as usize];
+            px[g] = (s.x as i32, s.y as i32, ProbeScale::new(s.d_mm));
+        }
+        live[..lanes].fill(true);
+        let mut left_to_do = lanes;
+        while left_to_do > 0 {
+            for j in 0..lanes {
+                if !live[j] {
+                    continue;
+                }
+                let (g, t) = (j / trees, j % trees);
+                match model.node(t, at[j]) {
+                    Node::Leaf(l) => {
+                        leaves[group[g] as usize][t] = l;
+                        live[j] = false;
+                        left_to_do -= 1;
+                    }
+                    Node::Split { test, left } => {
+                        let (x, y, sc) = px[g];
+                        at[j] = left + u32::from(!test.goes_left(img, x, y, sc));
+                    }
+                }
             }
         }
     }
@@ -115,22 +186,42 @@ pub fn collect_votes<M: ForestModel + ?Sized>(
     prior: Option<&Prior>,
     votes: &mut [Vote],
 ) -> usize {
+    let mut n = 0;
+    for_each_vote(model, method, point, positions, leaves, prior, |v| {
+        if n >= votes.len() {
+            return false;
+        }
+        votes[n] = v;
+        n += 1;
+        true
+    });
+    n
+}
+
+/// Every vote of [`collect_votes`] in order, handed to `sink` until it returns false (full).
+#[inline]
+fn for_each_vote<M: ForestModel + ?Sized>(
+    model: &M,
+    method: Method,
+    point: usize,
+    positions: impl Iterator<Item = [f32; 3]>,
+    leaves: &[[u32; MAX_TREES]],
+    prior: Option<&Prior>,
+    mut sink: impl FnMut(Vote) -> bool,
+) {
     let trees = model.tree_count();
     let params = model.params(point);
     let max_len2 = params.vote_length_m * params.vote_length_m;
-    let mut n = 0;
-    let mut push = |p: [f32; 3], w: f32, n: &mut usize| {
-        if w <= 0.0 || *n >= votes.len() {
-            return;
+    // Returns false once the sink is full.
+    let mut push = |p: [f32; 3], w: f32| {
+        if w <= 0.0 {
+            return true;
         }
         let w = match prior {
             Some(pr) => w * pr.weight(&p),
             None => w,
         };
-        if w > 0.0 {
-            votes[*n] = Vote { p, w };
-            *n += 1;
-        }
+        w <= 0.0 || sink(Vote { p, w })
     };
     for (p, row) in positions.zip(leaves) {
         match method {
@@ -144,7 +235,9 @@ pub fn collect_votes<M: ForestModel + ?Sized>(
                     }
                     w += v.weight;
                 }
-                push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w, &mut n);
+                if !push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w) {
+                    return;
+                }
             }
             Method::Baseline => {
                 for &l in &row[..trees] {
@@ -156,13 +249,14 @@ pub fn collect_votes<M: ForestModel + ?Sized>(
                         }
                         // Girshick et al. weight votes by depth squared (the pixel's world area).
                         let w = v.weight * p[2] * p[2];
-                        push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w, &mut n);
+                        if !push([p[0] + o[0], p[1] + o[1], p[2] + o[2]], w) {
+                            return;
+                        }
                     }
                 }
             }
         }
     }
-    n
 }
 
 /// Mean-shift of every point from samples whose leaves are known (`leaves[i]` for `positions[i]`).
@@ -213,31 +307,34 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     let want = cfg.samples.min(MAX_SAMPLES);
     let n = sample_pixels(img, k, clip, cfg.seed, &mut ws.samples[..want]);
     let trees = model.tree_count().min(MAX_TREES);
-    for i in 0..n {
-        let s = ws.samples[i];
-        for t in 0..trees {
-            ws.leaves[i][t] = descend(model, t, img, s.x as i32, s.y as i32, s.d_mm);
-        }
-    }
+    descend_samples(
+        model,
+        trees,
+        img,
+        &ws.samples[..n],
+        &mut ws.order,
+        &mut ws.leaves[..n],
+    );
     let mut out = [None; P];
-    let (samples, leaves, votes) = (&ws.samples[..n], &ws.leaves[..n], &mut ws.votes[..]);
+    let (samples, leaves, votes) = (&ws.samples[..n], &ws.leaves[..n], &mut ws.votes);
     for (point, slot) in out.iter_mut().enumerate() {
         let prior = priors[point].as_ref();
-        let c = collect_votes(
+        votes.clear();
+        for_each_vote(
             model,
             cfg.method,
             point,
             samples.iter().map(|s| s.p),
             leaves,
             prior,
-            votes,
+            |v| votes.push(v),
         );
         let pp = model.params(point);
         let h = match cfg.method {
             Method::Refined => pp.refined_bandwidth_m,
             Method::Baseline => pp.baseline_bandwidth_m,
         };
-        *slot = mean_shift(&votes[..c], h, prior.map(|p| p.mean)).map(|m| PointEstimate {
+        *slot = votes.mean_shift(h, prior.map(|p| p.mean)).map(|m| PointEstimate {
             position: Point3::from(m.p),
             confidence: m.confidence,
         });

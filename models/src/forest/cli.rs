@@ -264,7 +264,7 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         rss.map_or("?".into(), |r| format!("{r:.0}"))
     );
     println!(
-        "E_l scale {} m (validation); wrote {} ({} bytes) and its float leaves ({} bytes)",
+        "E_l scale per point {:?} m (validation); wrote {} ({} bytes) and its float leaves ({} bytes)",
         forest.error_scale_m,
         out.display(),
         bytes.len(),

@@ -31,8 +31,8 @@ pub struct FloatForest {
     pub body_leaf: Vec<bool>,
     /// Baseline leaves.
     pub baseline: Vec<BaselineLeaf>,
-    /// E_l scale s of v_l = exp(-(E_l / s)^2), metres (chosen on the validation bodies).
-    pub error_scale_m: f32,
+    /// E_l scale s per point of v_l = exp(-(E_l / s)^2), metres (chosen on the validation bodies).
+    pub error_scale_m: [f32; P],
     /// Per-point inference parameters.
     pub params: [PointParams; P],
     /// Samples per frame the forest was trained with.
@@ -55,7 +55,7 @@ impl FloatForest {
         if !self.body_leaf[leaf] {
             return 0.0;
         }
-        let e = self.leaf_error[leaf][point] / self.error_scale_m;
+        let e = self.leaf_error[leaf][point] / self.error_scale_m[point];
         (-e * e).exp()
     }
 

@@ -95,9 +95,10 @@ pub struct TrainSummary {
     pub nodes: Vec<usize>,
     /// Leaves per tree.
     pub leaves: Vec<usize>,
-    /// Chosen E_l scale, metres.
-    pub error_scale_m: f32,
-    /// Validation score (mean truncated error, m) per E_l scale tried (refined, bandwidth 0.05 m).
+    /// Chosen E_l scale per point, metres.
+    pub error_scale_m: [f32; P],
+    /// Validation score (mean over the points of the truncated error at each point's best bandwidth, m) per E_l
+    /// scale tried (refined).
     pub error_scale_scores: Vec<(f32, f32)>,
     /// Validation score per point of the chosen configuration, refined and baseline, mm.
     pub validation_error_mm: HashMap<String, [f32; 2]>,
@@ -475,24 +476,35 @@ pub fn train_on(
         leaf_error,
         body_leaf: stats.body_leaf,
         baseline: stats.baseline,
-        error_scale_m: 0.1,
+        error_scale_m: [0.1; P],
         params: [default_params; P],
         samples: cfg.samples_per_image as u32,
     };
+    // Per point, the (E_l scale, bandwidth) pair with the best validation score: a point's estimate depends only on
+    // its own confidences and bandwidth, so the choices are independent across points.
     let mut error_scale_scores = Vec::new();
-    let mut best_scale = (f32::INFINITY, 0.1f32);
     let tune_imgs: &[usize] = if val_imgs.is_empty() { &fit_imgs } else { &val_imgs };
+    let mut best_r = [(f32::INFINITY, 0.1f32, 0.05f32); P];
     for &s in &ERROR_SCALES_M {
-        forest.error_scale_m = s;
-        let e = validation_error(&forest, Method::Refined, &data, tune_imgs);
-        let mean = e.iter().sum::<f32>() / P as f32;
-        error_scale_scores.push((s, mean));
-        if mean < best_scale.0 {
-            best_scale = (mean, s);
+        forest.error_scale_m = [s; P];
+        let mut best_here = [f32::INFINITY; P];
+        for &h in &BANDWIDTHS_M {
+            forest.params = [PointParams {
+                refined_bandwidth_m: h,
+                baseline_bandwidth_m: h,
+                vote_length_m: cfg.vote_length_m,
+            }; P];
+            let er = validation_error(&forest, Method::Refined, &data, tune_imgs);
+            for p in 0..P {
+                best_here[p] = best_here[p].min(er[p]);
+                if er[p] < best_r[p].0 {
+                    best_r[p] = (er[p], s, h);
+                }
+            }
         }
+        error_scale_scores.push((s, best_here.iter().sum::<f32>() / P as f32));
     }
-    forest.error_scale_m = best_scale.1;
-    let mut best_r = [(f32::INFINITY, 0.05f32); P];
+    forest.error_scale_m = best_r.map(|b| b.1);
     let mut best_b = [(f32::INFINITY, 0.05f32); P];
     for &h in &BANDWIDTHS_M {
         forest.params = [PointParams {
@@ -500,12 +512,8 @@ pub fn train_on(
             baseline_bandwidth_m: h,
             vote_length_m: cfg.vote_length_m,
         }; P];
-        let er = validation_error(&forest, Method::Refined, &data, tune_imgs);
         let eb = validation_error(&forest, Method::Baseline, &data, tune_imgs);
         for p in 0..P {
-            if er[p] < best_r[p].0 {
-                best_r[p] = (er[p], h);
-            }
             if eb[p] < best_b[p].0 {
                 best_b[p] = (eb[p], h);
             }
@@ -514,7 +522,7 @@ pub fn train_on(
     let mut validation_error_mm = HashMap::new();
     for p in 0..P {
         forest.params[p] = PointParams {
-            refined_bandwidth_m: best_r[p].1,
+            refined_bandwidth_m: best_r[p].2,
             baseline_bandwidth_m: best_b[p].1,
             vote_length_m: cfg.vote_length_m,
         };
