@@ -3,3 +3,4 @@
 
 pub mod calibration;
 pub mod figure;
+pub mod tracking_truth;
