@@ -16,10 +16,11 @@
 //! All draws come from their own generators (seeded from the sequence seed), so sequences without episodes are the
 //! same bytes as before the episodes existed.
 
-use crate::dataset::{elbow_hint, mix_seed};
+use crate::dataset::{contact_at, elbow_hint, mix_seed};
 use crate::render::{Label, Renderer};
 use crate::scene::Scene;
-use crate::scene::arm::ArmState;
+use crate::scene::arm::{ArmState, FORE_LINK_M, PROBE_REACH_M, UPPER_LINK_M};
+use crate::scene::shapes::vertex_normals;
 use anyhow::{Result, ensure};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
@@ -287,20 +288,43 @@ fn smoothstep(x: f32) -> f32 {
     x * x * (3.0 - 2.0 * x)
 }
 
-/// Where the arm's shoulder is in a sequence with a full occlusion: on the robot beside the bed as usual
-/// ([`crate::dataset::sample_shoulder`]: 0.25–0.45 m outside the near edge) but under the head (within 0.25 m of
-/// the camera along the bed) and 0.45–0.75 m below it (at least 0.3 m above the mattress), as if mounted on the
-/// robot under its head, so the arm can reach into the head's line of sight:
-/// from the usual shoulder, 0.3–0.7 m along the bed, the wrist cannot come nearer the camera than about 0.6 m,
-/// where the arm hides only a third of the torso.
-pub fn shoulder_near_head(scene: &Scene, eye: Vector3<f32>, seed: u64) -> Vector3<f32> {
+/// Where the arm's shoulder is in a sequence with a full occlusion: on the robot beside the bed (0.2–0.5 m outside
+/// its near edge, within 0.5 m of the head along the bed, between 0.1 m above the mattress and 0.3 m below the
+/// head), where the wrist still reaches every corner of the sweep over the torso with 5 cm to spare, as near as
+/// possible to the head's line of sight 0.35 m in front of the camera. From the usual shoulder
+/// ([`crate::dataset::sample_shoulder`], 0.3–0.7 m along the bed from the torso centre and low) the wrist cannot
+/// come nearer the camera than about 0.6 m, where the arm hides only a third of the torso. `None` when no candidate
+/// reaches the whole sweep (the caller keeps the usual shoulder).
+pub fn shoulder_for_full_occlusion(scene: &Scene, eye: Vector3<f32>, seed: u64) -> Option<Vector3<f32>> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0x540));
     let b = &scene.bed;
-    Vector3::new(
-        eye.x + rng.gen_range(-0.25..0.25),
-        b.near_edge_y - rng.gen_range(0.25..0.45),
-        (eye.z - rng.gen_range(0.45..0.75)).max(b.mattress_top + 0.3),
-    )
+    let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
+    let wrists: Vec<Vector3<f32>> = [(0.35, 0.15), (0.65, 0.15), (0.35, 0.9), (0.65, 0.9), (0.5, 0.5)]
+        .iter()
+        .map(|&(u, v)| {
+            let (c, n) = contact_at(scene, &normals, u, v);
+            c + n * PROBE_REACH_M
+        })
+        .collect();
+    let park_zone = eye + (Vector3::from(scene.torso_centre()) - eye).normalize() * 0.35;
+    let reach = UPPER_LINK_M + FORE_LINK_M - 0.05;
+    let (z_lo, z_hi) = (b.mattress_top + 0.1, (eye.z - 0.3).max(b.mattress_top + 0.15));
+    let mut best: Option<(f32, Vector3<f32>)> = None;
+    for _ in 0..400 {
+        let s = Vector3::new(
+            eye.x + rng.gen_range(-0.5..0.5),
+            b.near_edge_y - rng.gen_range(0.2..0.5),
+            rng.gen_range(z_lo..z_hi),
+        );
+        if wrists.iter().any(|w| (w - s).norm() > reach) {
+            continue;
+        }
+        let d = (park_zone - s).norm();
+        if best.is_none_or(|(bd, _)| d < bd) {
+            best = Some((d, s));
+        }
+    }
+    best.map(|(_, s)| s)
 }
 
 /// Number of park candidates tried.

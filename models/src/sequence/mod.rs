@@ -259,7 +259,7 @@ pub fn generate(
     let eye = cfw.inverse().translation.vector;
     let arm_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
     let arm_shoulder = if cfg.full_occlusion {
-        episodes::shoulder_near_head(&scene0, eye, cfg.seed)
+        episodes::shoulder_for_full_occlusion(&scene0, eye, cfg.seed).unwrap_or(arm_shoulder)
     } else {
         arm_shoulder
     };
