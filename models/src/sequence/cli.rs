@@ -212,3 +212,42 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: SequenceArgs,
+    }
+
+    fn parse(argv: &[&str]) -> Result<SequenceArgs, clap::Error> {
+        Cli::try_parse_from(std::iter::once("sequence").chain(argv.iter().copied())).map(|c| c.args)
+    }
+
+    #[test]
+    fn motion_works_bare_or_with_a_kind_and_combines_with_the_occluders() {
+        let a = parse(&["--motion", "--out", "d"]).unwrap();
+        assert_eq!(a.motion, Some(MotionArg::Auto));
+        let a = parse(&["--out", "d", "--occluder", "--full-occlusion", "--motion"]).unwrap();
+        assert!(a.occluder && a.full_occlusion && a.motion == Some(MotionArg::Auto));
+        assert_eq!(
+            parse(&["--motion", "roll", "--out", "d"]).unwrap().motion,
+            Some(MotionArg::Roll)
+        );
+        assert_eq!(
+            parse(&["--motion=shift", "--out", "d"]).unwrap().motion,
+            Some(MotionArg::Shift)
+        );
+        assert_eq!(parse(&["--out", "d"]).unwrap().motion, None);
+        assert!(parse(&["--motion", "spin", "--out", "d"]).is_err());
+        assert!(parse(&["--full-occlusion", "--calibration", "--out", "d"]).is_err());
+        // A bare --motion picks both kinds over seeds, the same one for the same seed.
+        let kinds: Vec<MotionKind> = (0..16).map(|s| MotionArg::Auto.resolve(s)).collect();
+        assert!(kinds.contains(&MotionKind::Roll) && kinds.contains(&MotionKind::Shift));
+        assert_eq!(MotionArg::Auto.resolve(5), MotionArg::Auto.resolve(5));
+    }
+}
