@@ -5,9 +5,9 @@
 //! Loading checks every file against `sequence.json` (frame counts, vertex and triangle counts, indices, the arm
 //! states' count) and names the file and what is wrong when one is missing, truncated or corrupt.
 //!
-//! Cost: loading reads 12 bytes per torso vertex per frame (4.5 MB for 300 frames of the default model's subset);
-//! a torso surface score is one exact nearest-point query per estimated vertex ([`SurfaceQuery`]), ~20 ms for
-//! 1250 vertices against 2400 triangles; the other scores are a few flops.
+//! Cost: loading reads 12 bytes per torso vertex per frame (3 MB for 300 frames of the default model's 837-vertex
+//! subset); a torso surface score is one exact nearest-point query per estimated vertex ([`SurfaceQuery`]), ~10 ms
+//! for 837 vertices against 1542 triangles; the other scores are a few flops.
 
 use crate::eval::calibration::read_arm_capture;
 use crate::sequence::episodes::Episodes;

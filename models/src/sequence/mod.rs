@@ -13,7 +13,7 @@
 //! `robot_base_from_camera`).
 //!
 //! Cost per frame: one LBS (body source), one render, a second draw of the arm to measure occlusion, full-frame
-//! noise, one 16zT encode: ~20–40 ms on one core; the torso truth adds 15 kB written and one nearest-point query.
+//! noise, one 16zT encode: ~20–40 ms on one core; the torso truth adds 10 kB written and one nearest-point query.
 //! Frames are produced in order and streamed to disk.
 
 pub mod arm_stream;

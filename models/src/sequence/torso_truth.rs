@@ -17,9 +17,9 @@
 //! | N × u8, zero-padded to a multiple of 4 | [`BodyRegion`] wire value of each vertex |
 //! | F × N × 3 × f32 | vertex positions in the camera frame, metres, frame after frame |
 //!
-//! Cost: writing is 12 bytes per vertex per frame (15 kB for the default model's 1250-vertex subset). A nearest
-//! query is a bounding-sphere test per triangle and an exact closest-point test (Ericson) on the few that pass:
-//! about 30 M flops for 1250 queries against 2400 triangles, some 20 ms per frame scored.
+//! Cost: writing is 12 bytes per vertex per frame (10 kB for the default model's 837-vertex subset). A nearest
+//! query is two bounding-sphere passes over the triangles and an exact closest-point test (Ericson) on the few that
+//! pass: about 25 M flops for 837 queries against 1542 triangles, ~10 ms per frame scored.
 
 use crate::body::PosedBody;
 use crate::scene::shapes::vertex_normals;
@@ -269,23 +269,23 @@ impl<'a> SurfaceQuery<'a> {
         if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
             return None;
         }
-        let mut best: Option<Nearest> = None;
-        // Visit triangles by sphere distance so the bound tightens early; skip those that cannot beat it.
-        let mut order: Vec<(f32, usize)> = self
+        // Every point of a triangle lies within its sphere: the nearest sphere's far side bounds the answer, and
+        // only triangles whose sphere comes nearer than the best so far need the exact test.
+        let mut bound = self
             .spheres
             .iter()
-            .enumerate()
-            .map(|(i, (c, r))| ((p - Point3::from(*c)).norm() - r, i))
-            .collect();
-        order.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
-        for (lower, t) in order {
-            if best.is_some_and(|b| lower > b.distance) {
-                break;
+            .map(|(c, r)| (p - Point3::from(*c)).norm() + r)
+            .fold(f32::INFINITY, f32::min);
+        let mut best: Option<Nearest> = None;
+        for (t, (c, r)) in self.spheres.iter().enumerate() {
+            if (p - Point3::from(*c)).norm() - r > bound {
+                continue;
             }
             let [a, b, c] = self.triangles[t].map(|i| Point3::from(self.vertices[i as usize]));
             let (q, bary) = closest_on_triangle(p, &a, &b, &c);
             let d = (p - q).norm();
             if best.is_none_or(|b| d < b.distance) {
+                bound = bound.min(d);
                 best = Some(Nearest {
                     point: q,
                     distance: d,
