@@ -336,6 +336,26 @@ impl TrackingTruth {
     }
 }
 
+/// The sequence directories `--data` names: `path` itself when it holds a `sequence.json`, else its subdirectories
+/// that do, sorted by name; an error when there is none.
+pub fn sequence_dirs(path: &Path) -> Result<Vec<PathBuf>> {
+    if path.join("sequence.json").is_file() {
+        return Ok(vec![path.to_path_buf()]);
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join("sequence.json").is_file())
+        .collect();
+    dirs.sort();
+    ensure!(
+        !dirs.is_empty(),
+        "{} holds no sequence (no sequence.json in it or its subdirectories)",
+        path.display()
+    );
+    Ok(dirs)
+}
+
 fn read_arm(dir: &Path, stream: &arm_stream::ArmStream) -> Result<Vec<ArmSample>> {
     let path = dir.join(&stream.file);
     ensure!(
@@ -526,8 +546,16 @@ mod tests {
         assert!(err(&copy).contains("missing"));
 
         reset();
+        assert_eq!(sequence_dirs(&copy).unwrap(), vec![copy.clone()]);
+        assert!(sequence_dirs(copy.parent().unwrap()).unwrap().contains(&copy));
         std::fs::remove_file(copy.join("sequence.json")).unwrap();
         assert!(err(&copy).contains("not a sequence directory"));
+        assert!(
+            sequence_dirs(&copy)
+                .unwrap_err()
+                .to_string()
+                .contains("no sequence")
+        );
         std::fs::remove_dir_all(&copy).ok();
         std::fs::remove_dir_all(&dir).ok();
     }
