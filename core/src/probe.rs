@@ -94,7 +94,7 @@ impl ProbeMapping {
 }
 
 /// The point of triangle `abc` nearest `p`, with its barycentric weights (Ericson §5.1.5).
-fn closest_on_triangle(p: &Point3, a: &Point3, b: &Point3, c: &Point3) -> (Point3, [f32; 3]) {
+pub fn closest_on_triangle(p: &Point3, a: &Point3, b: &Point3, c: &Point3) -> (Point3, [f32; 3]) {
     let ab = b - a;
     let ac = c - a;
     let ap = p - a;

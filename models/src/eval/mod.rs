@@ -5,3 +5,4 @@ pub mod calibration;
 pub mod figure;
 pub mod tracking;
 pub mod tracking_plot;
+pub mod tracking_truth;

@@ -44,6 +44,11 @@ pub trait BodySource: Sync {
     /// The body with `shape` fixed and the pose blended between two sampled poses (`t` in 0..1), for slow motion in
     /// sequences: `a` and `b` are pose seeds. Sources that cannot interpolate return the `a` pose.
     fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<Patient>;
+    /// Skin vertex indices of the torso surface the tracker's model is made of (the body model's torso ICP
+    /// subset); `None` for sources without one.
+    fn torso_subset(&self) -> Option<Vec<u32>> {
+        None
+    }
 }
 
 /// Parameters of the procedural mannequin.

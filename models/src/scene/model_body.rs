@@ -99,6 +99,10 @@ impl BodySource for ModelBodySource {
         let json = serde_json::json!({ "from_combination": c, "to_combination": other, "t": t, "lying": first.lying, "pose": blended.pose });
         Ok(self.on_bed(&shape, &blended, json))
     }
+
+    fn torso_subset(&self) -> Option<Vec<u32>> {
+        Some(self.model.torso_subset.clone())
+    }
 }
 
 /// Which body source a command uses.

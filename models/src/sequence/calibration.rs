@@ -295,6 +295,10 @@ pub fn generate_calibration(
         bed,
         planes_camera: scene.planes_world().map(|p| p.transformed(&cfw)),
         calibration: Some(meta.clone()),
+        episodes: Default::default(),
+        robot_base_from_camera: None,
+        arm: None,
+        torso_surface: None,
     };
     std::fs::write(dir.join("sequence.json"), serde_json::to_vec_pretty(&seq_meta)?)?;
 

@@ -1,5 +1,6 @@
 //! `supine-models sequence`: argument parsing, progress bar and JSON summary around [`super::generate`].
 
+use super::episodes::MotionKind;
 use super::{SequenceConfig, generate};
 use crate::scene::model_body::{BodyKind, open_source};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
@@ -18,6 +19,14 @@ pub struct SequenceArgs {
     /// Let the robot arm sweep the probe over the torso (occluding up to about half of it).
     #[arg(long)]
     pub occluder: bool,
+    /// The arm parks between the head and the whole torso for about 1 s (30 frames, under ~10 % of the torso left
+    /// visible), then leaves; the frame range goes into DIR/sequence.json.
+    #[arg(long, conflicts_with = "calibration")]
+    pub full_occlusion: bool,
+    /// The patient rolls 15–20° onto one side or shifts 10 cm over 1.5 s (bare: chosen by the seed); the frame
+    /// range goes into DIR/sequence.json.
+    #[arg(long, value_enum, num_args = 0..=1, default_missing_value = "auto", conflicts_with = "calibration")]
+    pub motion: Option<MotionArg>,
     /// A calibration sequence: the arm visits poses above the bed (12 frames each), arm states beside the .oni in
     /// DIR/arm.cobs, the true extrinsic in DIR/sequence.json.
     #[arg(long, conflicts_with = "occluder")]
@@ -47,6 +56,28 @@ pub struct SequenceArgs {
     /// Write a machine-readable summary here.
     #[arg(long)]
     pub json: Option<PathBuf>,
+}
+
+/// `--motion`'s value.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum MotionArg {
+    /// Roll or shift, chosen by the seed.
+    Auto,
+    /// A roll onto one side.
+    Roll,
+    /// A shift on the mattress.
+    Shift,
+}
+
+impl MotionArg {
+    /// The motion this value asks for with `seed`.
+    pub fn resolve(self, seed: u64) -> MotionKind {
+        match self {
+            MotionArg::Auto => MotionKind::for_seed(seed),
+            MotionArg::Roll => MotionKind::Roll,
+            MotionArg::Shift => MotionKind::Shift,
+        }
+    }
 }
 
 /// Run the command; exit 0 on success, 1 on a runtime failure, 2 on bad arguments.
@@ -121,6 +152,8 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     let base = SequenceConfig::new(args.frames, args.seed, args.occluder);
     let cfg = SequenceConfig {
         breathing_amplitude_m: args.breathing_mm / 1000.0,
+        full_occlusion: args.full_occlusion,
+        motion: args.motion.map(|m| m.resolve(args.seed)),
         noise: if args.legacy_noise {
             crate::render::noise::KinectNoise::LEGACY
         } else if args.registered {
@@ -149,15 +182,72 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         100.0 * summary.torso_occluded_max,
         summary.frames_per_second
     );
+    if let Some(o) = summary.episodes.full_occlusion {
+        eprintln!(
+            "full occlusion: frames {}..{} (arm moving {}..{}), torso hidden {:.0} % at least, arm wrist {:.2} m from the camera",
+            o.start,
+            o.end,
+            o.approach_start,
+            o.leave_end,
+            100.0 * o.torso_occluded_fraction_min,
+            o.park_distance_m
+        );
+    }
+    if let Some(m) = summary.episodes.motion {
+        eprintln!(
+            "motion: {:?} frames {}..{} (roll {:.1}°, shift [{:.3}, {:.3}] m)",
+            m.kind, m.start, m.end, m.roll_deg, m.shift_m[0], m.shift_m[1]
+        );
+    }
     if let Some(path) = &args.json {
         let mut v = serde_json::to_value(&summary)?;
         v["command"] = "sequence".into();
         v["seed"] = args.seed.into();
         v["occluder"] = args.occluder.into();
+        v["full_occlusion"] = args.full_occlusion.into();
         v["body_source"] = source.name().into();
         v["out"] = serde_json::to_value(&args.out)?;
         std::fs::write(path, serde_json::to_vec_pretty(&v)?)
             .map_err(|e| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use clap::Parser;
+
+    #[derive(Debug, Parser)]
+    struct Cli {
+        #[command(flatten)]
+        args: SequenceArgs,
+    }
+
+    fn parse(argv: &[&str]) -> Result<SequenceArgs, clap::Error> {
+        Cli::try_parse_from(std::iter::once("sequence").chain(argv.iter().copied())).map(|c| c.args)
+    }
+
+    #[test]
+    fn motion_works_bare_or_with_a_kind_and_combines_with_the_occluders() {
+        let a = parse(&["--motion", "--out", "d"]).unwrap();
+        assert_eq!(a.motion, Some(MotionArg::Auto));
+        let a = parse(&["--out", "d", "--occluder", "--full-occlusion", "--motion"]).unwrap();
+        assert!(a.occluder && a.full_occlusion && a.motion == Some(MotionArg::Auto));
+        assert_eq!(
+            parse(&["--motion", "roll", "--out", "d"]).unwrap().motion,
+            Some(MotionArg::Roll)
+        );
+        assert_eq!(
+            parse(&["--motion=shift", "--out", "d"]).unwrap().motion,
+            Some(MotionArg::Shift)
+        );
+        assert_eq!(parse(&["--out", "d"]).unwrap().motion, None);
+        assert!(parse(&["--motion", "spin", "--out", "d"]).is_err());
+        assert!(parse(&["--full-occlusion", "--calibration", "--out", "d"]).is_err());
+        // A bare --motion picks both kinds over seeds, the same one for the same seed.
+        let kinds: Vec<MotionKind> = (0..16).map(|s| MotionArg::Auto.resolve(s)).collect();
+        assert!(kinds.contains(&MotionKind::Roll) && kinds.contains(&MotionKind::Shift));
+        assert_eq!(MotionArg::Auto.resolve(5), MotionArg::Auto.resolve(5));
+    }
 }

@@ -3,25 +3,36 @@
 //! sub-poses) and, with the occluder, the robot arm sweeping the probe over the torso (hips → shoulders and back),
 //! hiding up to about half of it.
 //!
+//! With `--full-occlusion` the arm also parks between the head and the torso for about 1 s, and with `--motion` the
+//! patient rolls or shifts ([`episodes`]; their frame ranges go into `sequence.json`).
+//!
 //! Output in `DIR`: `sequence.oni` (OpenNI2 recording through `supine_drivers::oni::OniWriter`, 16zT like OpenNI's
-//! Recorder), `truth.jsonl` (one [`FrameTruth`] per frame) and `sequence.json` ([`SequenceMeta`]).
+//! Recorder), `truth.jsonl` (one [`FrameTruth`] per frame, with the true probe mapping where the arm is present),
+//! `torso.bin` (the true posed torso surface per frame, [`torso_truth`]), `arm.cobs` when the arm is present (its
+//! states as the controller would send them, [`arm_stream`]) and `sequence.json` ([`SequenceMeta`], with the true
+//! `robot_base_from_camera`).
 //!
 //! Cost per frame: one LBS (body source), one render, a second draw of the arm to measure occlusion, full-frame
-//! noise, one 16zT encode: ~20–40 ms on one core. Frames are produced in order and streamed to disk.
+//! noise, one 16zT encode: ~20–40 ms on one core; the torso truth adds 10 kB written and one nearest-point query.
+//! Frames are produced in order and streamed to disk.
 
+pub mod arm_stream;
 pub mod calibration;
 pub mod cli;
+pub mod episodes;
+pub mod torso_truth;
 
 use crate::body::PosedBody;
 use crate::dataset::{contact_at, mix_seed, project_salient};
 use crate::render::effects::TemporalState;
 use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
 use crate::render::{Label, Renderer};
-use crate::scene::arm::ArmState;
 use crate::scene::body::BodySource;
 use crate::scene::shapes::vertex_normals;
 use crate::scene::{BedParams, Scene, ViewParams, matrix_rows};
 use anyhow::{Context, Result, ensure};
+use calibration::Extrinsic;
+use episodes::{ArmPhase, ArmTarget, EpisodeFrames, Episodes, MotionKind};
 use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -31,6 +42,7 @@ use std::path::Path;
 use supine_core::camera::Intrinsics;
 use supine_core::geometry::Plane;
 use supine_drivers::oni::{Codec, OniWriter};
+use torso_truth::{ProbeTruth, SurfaceQuery, TorsoSelection, TorsoWriter};
 
 /// Parameters of a sequence.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -51,6 +63,15 @@ pub struct SequenceConfig {
     pub sweep_period_s: f32,
     /// Noise model.
     pub noise: KinectNoise,
+    /// Whether the arm parks over the whole torso for a while (the full-occlusion episode).
+    #[serde(default)]
+    pub full_occlusion: bool,
+    /// The patient's motion episode, if any.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub motion: Option<MotionKind>,
+    /// Lengths of the episodes.
+    #[serde(default)]
+    pub episode_frames: EpisodeFrames,
 }
 
 impl SequenceConfig {
@@ -65,8 +86,24 @@ impl SequenceConfig {
             breathing_hz: 0.25,
             sweep_period_s: 10.0,
             noise: KinectNoise::default(),
+            full_occlusion: false,
+            motion: None,
+            episode_frames: EpisodeFrames::default(),
         }
     }
+}
+
+/// `sequence.json`'s `torso_surface`: where the true torso surface is and its size.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct TorsoSurfaceMeta {
+    /// File name, relative to the sequence directory (layout in [`torso_truth`]).
+    pub file: String,
+    /// Vertices per frame.
+    pub vertices: u32,
+    /// Triangles.
+    pub triangles: u32,
+    /// Which vertices: `torso_subset` (the body model's) or `torso_parts_facing_up` (sources without a subset).
+    pub selection: String,
 }
 
 /// `DIR/sequence.json`: what is constant over the sequence.
@@ -91,6 +128,18 @@ pub struct SequenceMeta {
     /// Calibration sequences (`--calibration`): the true extrinsic, the nominal guess, the poses.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub calibration: Option<calibration::CalibrationMeta>,
+    /// The full-occlusion and motion episodes (frame ranges).
+    #[serde(default)]
+    pub episodes: Episodes,
+    /// The true extrinsic of the head (`robot_base` is the scene's world frame), tracking sequences.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub robot_base_from_camera: Option<Extrinsic>,
+    /// The arm states beside the recording, when the arm is present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arm: Option<arm_stream::ArmStream>,
+    /// The true torso surface per frame.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub torso_surface: Option<TorsoSurfaceMeta>,
 }
 
 /// Ground truth of one frame (`truth.jsonl`).
@@ -121,6 +170,9 @@ pub struct FrameTruth {
     pub breathing_mm: f32,
     /// Arm-motion blend parameter (0..1) of the body pose.
     pub arm_blend: f32,
+    /// The true probe mapping on the true torso surface, when the arm is present.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub probe_truth: Option<ProbeTruth>,
 }
 
 /// Summary of a generated sequence.
@@ -134,6 +186,8 @@ pub struct SequenceSummary {
     pub torso_occluded_max: f32,
     /// Frames per second of generation.
     pub frames_per_second: f32,
+    /// The episodes as generated (with the measured occlusion of the park).
+    pub episodes: Episodes,
 }
 
 /// Torso frame from the salient points (core's [`supine_core::torso::a_from_torso`]): origin at the hip centre, y
@@ -202,14 +256,31 @@ pub fn generate(
     let scene0 = Scene::new(&first.body, bed);
     let view = ViewParams::sample_nominal(&mut rng, scene0.torso_centre()).sample_view(&mut rng);
     let cfw = view.camera_from_world(scene0.midline_y(), bed.mattress_top);
+    let eye = cfw.inverse().translation.vector;
     let arm_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
+    let arm_shoulder = if cfg.full_occlusion {
+        episodes::shoulder_for_full_occlusion(&scene0, eye, cfg.seed).unwrap_or(arm_shoulder)
+    } else {
+        arm_shoulder
+    };
     let tau = std::f32::consts::TAU;
     let drift_phase: [f32; 3] = [
         rng.gen_range(0.0..tau),
         rng.gen_range(0.0..tau),
         rng.gen_range(0.0..tau),
     ];
-    let meta = SequenceMeta {
+    let s0 = first.body.salient_points.map(Vector3::from);
+    let mut episodes = episodes::plan(
+        cfg.frames,
+        cfg.seed,
+        cfg.full_occlusion,
+        cfg.motion,
+        &cfg.episode_frames,
+        (s0[4] + s0[5]) * 0.5,
+        0.5 * (s0[1] - s0[2]).norm(),
+    )?;
+    let subset = source.torso_subset();
+    let mut meta = SequenceMeta {
         config: cfg.clone(),
         body_source: source.name(),
         shape: first.shape.clone(),
@@ -219,8 +290,11 @@ pub fn generate(
         bed,
         planes_camera: scene0.planes_world().map(|p| p.transformed(&cfw)),
         calibration: None,
+        episodes,
+        robot_base_from_camera: Some(Extrinsic::from_isometry(&cfw.inverse())),
+        arm: None,
+        torso_surface: None,
     };
-    std::fs::write(dir.join("sequence.json"), serde_json::to_vec_pretty(&meta)?)?;
     let oni_path = dir.join("sequence.oni");
     let mut oni = OniWriter::create(&oni_path, &k, Codec::Z16Table)
         .with_context(|| format!("creating {}", oni_path.display()))?;
@@ -233,6 +307,9 @@ pub fn generate(
     let mut temporal = TemporalState::default();
     let mut depth = vec![0u16; k.width as usize * k.height as usize];
     let (mut occ_sum, mut occ_max) = (0.0f32, 0.0f32);
+    let mut torso_out: Option<(TorsoSelection, TorsoWriter)> = None;
+    let mut park: Option<ArmTarget> = None;
+    let mut probe_poses: Vec<Option<Isometry3<f32>>> = Vec::with_capacity(cfg.frames as usize);
     for f in 0..cfg.frames {
         let time = f as f32 / cfg.fps;
         let time_us = (f as f64 * 1e6 / cfg.fps as f64).round() as u64;
@@ -252,12 +329,44 @@ pub fn generate(
                 0.03 * (tau * time / 19.0 + drift_phase[2]).sin(),
             ),
         );
+        let bed_motion = episodes
+            .motion
+            .map_or_else(Isometry3::identity, |m| m.bed_transform(f));
+        let place = bed_motion * drift;
         for v in body.vertices.iter_mut().chain(body.salient_points.iter_mut()) {
-            let p = drift * Point3::from(*v);
+            let p = place * Point3::from(*v);
             *v = [p.x, p.y, p.z];
+        }
+        if torso_out.is_none() {
+            let torso_from_bed = torso_pose(&body.salient_points).inverse();
+            let sel = TorsoSelection::choose(&body, &first.part_names, subset.as_deref(), &torso_from_bed)?;
+            let writer = TorsoWriter::create(&dir.join(torso_truth::FILE_NAME), cfg.frames, &sel)?;
+            meta.torso_surface = Some(TorsoSurfaceMeta {
+                file: torso_truth::FILE_NAME.to_string(),
+                vertices: sel.vertices.len() as u32,
+                triangles: sel.triangles.len() as u32,
+                selection: if subset.is_some() {
+                    "torso_subset"
+                } else {
+                    "torso_parts_facing_up"
+                }
+                .to_string(),
+            });
+            torso_out = Some((sel, writer));
         }
         let mut scene = Scene::new(&body, bed);
         let is_torso = |p: u8| torso_parts.contains(&p);
+        let phase = episodes.full_occlusion.map_or(ArmPhase::Path, |o| o.phase(f));
+        if phase != ArmPhase::Path
+            && park.is_none()
+            && let Some(o) = episodes.full_occlusion.as_mut()
+        {
+            let (target, fraction, distance) =
+                episodes::find_park_pose(&scene, &cfw, &mut renderer, arm_shoulder, &is_torso, cfg.seed)?;
+            o.planned_torso_occluded_fraction = fraction;
+            o.park_distance_m = distance;
+            park = Some(target);
+        }
         scene.render(&mut renderer, &cfw, false);
         let count = |r: &Renderer| {
             let b = r.buffers();
@@ -274,16 +383,32 @@ pub fn generate(
         let (torso0, all0) = count(&renderer);
         let (mut torso_occ, mut body_occ) = (0.0, 0.0);
         let mut probe = None;
-        if cfg.occluder {
+        let sweep = cfg.occluder.then(|| {
             // Sweep along the midline (v: hips 0.9 → shoulders 0.15 and back) with a slow sideways wobble.
             let phase = (time / cfg.sweep_period_s).fract();
             let v = 0.9 - 0.75 * (1.0 - (2.0 * phase - 1.0).abs());
             let u = 0.5 + 0.15 * (tau * time / 7.0).sin();
             let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
             let (contact, normal) = contact_at(&scene, &normals, u, v);
-            let eye = cfw.inverse().translation.vector;
-            let hint = crate::dataset::elbow_hint(arm_shoulder, contact, eye);
-            let arm = ArmState::reach(arm_shoulder, contact, -normal, hint);
+            ArmTarget {
+                tip: contact,
+                axis: -normal,
+                hint: crate::dataset::elbow_hint(arm_shoulder, contact, eye),
+            }
+        });
+        let target = match (phase, park) {
+            (ArmPhase::Path, _) | (_, None) => sweep,
+            (phase, Some(park)) => {
+                let path = sweep.unwrap_or_else(|| ArmTarget::home(arm_shoulder, eye));
+                Some(match phase {
+                    ArmPhase::Approach(s) => path.lerp(&park, s),
+                    ArmPhase::Leave(s) => park.lerp(&path, s),
+                    _ => park,
+                })
+            }
+        };
+        if let Some(target) = target {
+            let arm = target.reach(arm_shoulder);
             renderer.draw(&crate::scene::arm_draw(&arm.mesh), &cfw);
             let (torso1, all1) = count(&renderer);
             torso_occ = if torso0 > 0 {
@@ -299,6 +424,12 @@ pub fn generate(
             probe = Some(arm.world_from_probe);
             scene.arm = Some(arm);
         }
+        if phase == ArmPhase::Parked
+            && let Some(o) = episodes.full_occlusion.as_mut()
+        {
+            o.torso_occluded_fraction_min = o.torso_occluded_fraction_min.min(torso_occ);
+        }
+        probe_poses.push(probe);
         occ_sum += torso_occ;
         occ_max = occ_max.max(torso_occ);
         let noise_seed = mix_seed(mix_seed(cfg.seed, 0x5E0), f as u64 + 1);
@@ -314,6 +445,16 @@ pub fn generate(
         oni.write_frame(&depth, time_us)
             .with_context(|| format!("writing frame {f} to {}", oni_path.display()))?;
         let (salient_camera, salient_pixels) = project_salient(&scene, &cfw, &k);
+        let mut probe_truth = None;
+        if let Some((sel, writer)) = torso_out.as_mut() {
+            let torso_camera = sel.camera_vertices(&scene.body_vertices, &cfw);
+            writer.write_frame(&torso_camera)?;
+            if let Some(p) = probe {
+                let tip = cfw * Point3::from(p.translation.vector);
+                let query = SurfaceQuery::new(&torso_camera, &sel.triangles);
+                probe_truth = torso_truth::map_tip(&query, &sel.regions, &tip);
+            }
+        }
         let ft = FrameTruth {
             frame: f,
             time_us,
@@ -327,10 +468,14 @@ pub fn generate(
             body_occluded_fraction: body_occ,
             breathing_mm: cfg.breathing_amplitude_m * breath * 1000.0,
             arm_blend,
+            probe_truth,
         };
         serde_json::to_writer(&mut truth, &ft)?;
         truth.write_all(b"\n")?;
-        if f == 0 || (cfg.occluder && (f == cfg.frames / 2)) {
+        let mid_park = episodes
+            .full_occlusion
+            .is_some_and(|o| f == (o.start + o.end) / 2);
+        if f == 0 || (cfg.occluder && (f == cfg.frames / 2)) || mid_park {
             let mut rgb = crate::dataset::preview::colour_depth(&depth, Some(&renderer.buffers().label));
             crate::dataset::preview::draw_truth(
                 &mut rgb,
@@ -351,12 +496,26 @@ pub fn generate(
     truth.flush()?;
     oni.finish()
         .with_context(|| format!("finishing {}", oni_path.display()))?;
+    if let Some((_, writer)) = torso_out {
+        writer.finish()?;
+    }
+    if probe_poses.iter().any(Option::is_some) {
+        meta.arm = Some(arm_stream::write_arm_states(
+            dir,
+            &probe_poses,
+            cfg.fps,
+            cfg.seed,
+        )?);
+    }
+    meta.episodes = episodes;
+    std::fs::write(dir.join("sequence.json"), serde_json::to_vec_pretty(&meta)?)?;
     let secs = started.elapsed().as_secs_f32();
     Ok(SequenceSummary {
         frames: cfg.frames,
         torso_occluded_mean: occ_sum / cfg.frames as f32,
         torso_occluded_max: occ_max,
         frames_per_second: cfg.frames as f32 / secs.max(1e-6),
+        episodes,
     })
 }
 

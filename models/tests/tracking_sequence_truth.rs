@@ -1,0 +1,65 @@
+//! A short tracking sequence of the statistical body with the sweep, the full occlusion and a shift: the parked arm
+//! hides over 90 % of the torso, the true torso surface is the body model's torso ICP subset, the sweeping probe
+//! rests 3 mm outside it, and the truth scores itself as zero. Seed 131 is used by no other test or tuning.
+
+use supine_models::eval::tracking_truth::TrackingTruth;
+use supine_models::scene::model_body::{BodyKind, open_source};
+use supine_models::sequence::episodes::{EpisodeFrames, MotionKind};
+use supine_models::sequence::{SequenceConfig, generate};
+
+#[test]
+fn body_model_sequence_with_every_episode_has_consistent_truth() {
+    let source = open_source(BodyKind::Model, None).expect("the committed body model");
+    let subset = source.torso_subset().expect("the body model has a torso subset");
+    let dir = std::env::temp_dir().join(format!("supine-track-seq-{}", std::process::id()));
+    let cfg = SequenceConfig {
+        full_occlusion: true,
+        motion: Some(MotionKind::Shift),
+        episode_frames: EpisodeFrames {
+            transit: 2,
+            full_occlusion: 4,
+            motion: 4,
+        },
+        sweep_period_s: 0.6,
+        ..SequenceConfig::new(20, 131, true)
+    };
+    generate(source.as_ref(), &cfg, &dir, &mut |_, _| {}).unwrap();
+    let t = TrackingTruth::load(&dir).unwrap();
+    assert_eq!(t.torso.vertex_count(), subset.len());
+    assert_eq!(t.meta.torso_surface.as_ref().unwrap().selection, "torso_subset");
+    let o = t.episodes().full_occlusion.unwrap();
+    assert!(
+        o.torso_occluded_fraction_min > 0.9,
+        "the parked arm hides {:.2} of the torso",
+        o.torso_occluded_fraction_min
+    );
+    let m = t.episodes().motion.unwrap();
+    assert_eq!(m.kind, MotionKind::Shift);
+    // The shift moves the hips by its 10 cm (plus the slow drift, a few mm over these frames).
+    let hips = |f: usize| {
+        let s = &t.frames[f].salient_world;
+        nalgebra::Vector3::new(s[4][0] + s[5][0], s[4][1] + s[5][1], s[4][2] + s[5][2]) * 0.5
+    };
+    let moved = (hips(19) - hips(m.start as usize - 1)).norm();
+    assert!((moved - 0.1).abs() < 0.01, "hips moved {moved} m");
+    let mut on_skin = 0;
+    for f in 0..20u32 {
+        let v = t.torso.frame(f as usize).unwrap();
+        assert!(t.torso_surface_error_mm(v, f).unwrap() < 1e-3);
+        let sweeping = f < o.approach_start || f >= o.leave_end;
+        if let Some(p) = t.frames[f as usize]
+            .probe_truth
+            .as_ref()
+            .filter(|p| p.near_body && sweeping)
+        {
+            on_skin += 1;
+            assert!(
+                (p.signed_distance_m - 0.003).abs() < 0.001,
+                "frame {f}: the tip is {} m from the skin",
+                p.signed_distance_m
+            );
+        }
+    }
+    assert!(on_skin >= 8, "{on_skin} sweep frames with the tip on the torso");
+    std::fs::remove_dir_all(&dir).ok();
+}
