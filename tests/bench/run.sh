@@ -65,6 +65,8 @@ run() {
 
 # 1. Criterion: every per-frame stage that exists.
 if ((quick)); then crit=(--warm-up-time 1 --measurement-time 2); else crit=(--warm-up-time 3 --measurement-time 10); fi
+# Built first on every core, then measured pinned to one.
+run cargo bench -q -p supine-models --bench stages --no-run
 run "${pin[@]}" cargo bench -q -p supine-models --bench stages -- "${crit[@]}" >"$work/stages.txt"
 
 # 2. The whole frame: the tracker's criterion bench named `frame`, when it exists.
@@ -77,6 +79,7 @@ done
 if [[ -n $frame_bench ]]; then
     pkg=supine-core
     [[ $frame_bench == models ]] && pkg=supine-models
+    run cargo bench -q -p "$pkg" --bench frame --no-run
     run "${pin[@]}" cargo bench -q -p "$pkg" --bench frame -- "${crit[@]}" >"$work/frame.txt"
 fi
 if ((instructions)); then
@@ -91,9 +94,9 @@ if ((quick)); then
     icp_peer_repeats=3
     forest_args=(--bodies 8 --views 4 --depth 12 --epochs 8 --test-images 12 --repeats 3)
 else
-    icp_args=(--bodies 10 --views 4 --repeats 21)
-    icp_peer_repeats=5
-    forest_args=(--bodies 30 --views 8 --depth 20 --epochs 48 --test-images 60 --repeats 5)
+    icp_args=(--bodies 8 --views 3 --repeats 21)
+    icp_peer_repeats=3
+    forest_args=(--bodies 24 --views 8 --depth 20 --epochs 32 --test-images 48 --repeats 5)
 fi
 run "${pin[@]}" "$bench" icp --out "$work/icp" --seed 1400 "${icp_args[@]}"
 run "${pin[@]}" "$py" tests/bench/icp_peers.py "$work/icp" --repeats "$icp_peer_repeats" --json "$work/icp.json"
