@@ -13,6 +13,7 @@ for var in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ[var] = "1"
 
 import argparse
+import importlib.metadata
 import json
 import sys
 import tempfile
@@ -174,7 +175,7 @@ def main():
 
     out = {
         "problems": len(results),
-        "versions": {"open3d": o3d.__version__, "small_gicp": getattr(small_gicp, "__version__", "unknown"),
+        "versions": {"open3d": o3d.__version__, "small_gicp": importlib.metadata.version("small_gicp"),
                      "numpy": np.__version__},
         "eval_inlier_m": EVAL_INLIER_M,
         "summary": summary,
