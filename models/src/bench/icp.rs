@@ -337,10 +337,13 @@ mod tests {
 
     #[test]
     fn driver_recovers_a_perturbed_plane_pose_and_stops_early() {
-        // A tilted, curved surface seen at 1.2 m: a model of its points must return to the truth.
+        // A tilted, bumpy surface seen at 1.2 m (bumps, so that no sliding along it fits as well): a model of its
+        // points must return to the truth.
         let k = Intrinsics::KINECT_V1;
         let (w, h) = (k.width as usize, k.height as usize);
-        let surf = |x: f32, y: f32| 1.2 + 0.3 * x * x + 0.2 * y * y + 0.1 * x;
+        let surf = |x: f32, y: f32| {
+            1.2 + 0.3 * x * x + 0.2 * y * y + 0.1 * x + 0.03 * (15.0 * x).sin() * (12.0 * y).cos()
+        };
         let mut depth = vec![0u16; w * h];
         for v in 0..h {
             for u in 0..w {
@@ -359,7 +362,9 @@ mod tests {
             for j in -10..=10 {
                 let (x, y) = (i as f32 * 0.02, j as f32 * 0.02);
                 pts.push([x, y, surf(x, y)]);
-                let n = V3::new(0.6 * x + 0.1, 0.4 * y, -1.0).normalize();
+                let gx = 0.6 * x + 0.1 + 0.45 * (15.0 * x).cos() * (12.0 * y).cos();
+                let gy = 0.4 * y - 0.36 * (15.0 * x).sin() * (12.0 * y).sin();
+                let n = V3::new(gx, gy, -1.0).normalize();
                 nrm.push([n.x, n.y, n.z]);
             }
         }
