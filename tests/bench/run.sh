@@ -26,7 +26,7 @@ while (($#)); do
     --quick) quick=1 ;;
     --json) [[ $# -ge 2 ]] || { echo "tests/bench/run.sh: --json needs a file" >&2; exit 2; }; json=$2; shift ;;
     --instructions) instructions=1 ;;
-    -h | --help) sed -n '2,17p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    -h | --help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "tests/bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
     shift
