@@ -113,7 +113,8 @@ def main():
     insn = load(os.path.join(w, "instructions.json"))
     stages = {n: criterion_median_ns("stages", n) for n, _ in STAGES}
     with open(os.path.join(w, "commands.txt")) as f:
-        commands = [line.rstrip("\n") for line in f if line.strip()]
+        # Relative to the repository root (run.sh runs there), so the page reads the same on every checkout.
+        commands = [line.rstrip("\n").replace(os.getcwd() + "/", "") for line in f if line.strip()]
     commit = sh("git", "rev-parse", "--short", "HEAD")
     if sh("git", "status", "--porcelain", "--untracked-files=no"):
         commit += " (with uncommitted changes)"
