@@ -6,6 +6,7 @@
 #
 #   tests/run.sh              everything
 #   SUPINE_SKIP=cross,fuzz tests/run.sh   skip steps whose names contain these words (local iteration only)
+#   SUPINE_BENCH=1 tests/run.sh           also run the quick benchmarks (tests/bench/run.sh --quick)
 set -uo pipefail
 cd "$(dirname "$0")/.."
 root=$(pwd)
@@ -54,6 +55,11 @@ for peer in tests/peers/*.sh; do
 done
 if [[ -x tests/fuzz-smoke.sh ]]; then
     step fuzz tests/fuzz-smoke.sh
+fi
+# Opt-in (SUPINE_BENCH=1): the quick side-by-side benchmarks (tests/bench/run.sh --quick, ~4 min on a built tree,
+# plus the release and bench builds on a fresh one); figures only, no pass/fail threshold beyond running cleanly.
+if [[ ${SUPINE_BENCH:-0} == 1 ]]; then
+    step bench-quick tests/bench/run.sh --quick
 fi
 if [[ -x cross/setup ]]; then
     step cross-setup cross/setup

@@ -4,6 +4,7 @@
 //! → evaluation reports. Runs on a workstation (rayon for parallel work); never on the head computer.
 
 pub mod assets;
+pub mod bench;
 pub mod body;
 pub mod dataset;
 pub mod eval;
