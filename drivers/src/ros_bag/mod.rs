@@ -146,6 +146,11 @@ impl McapSource {
         stream::inventory(path, &path.display().to_string())
     }
 
+    /// Image messages on the topic, when the bag's statistics (or the open scan) counted them.
+    pub fn frame_count(&self) -> Option<u64> {
+        self.frames
+    }
+
     /// The topic being played.
     pub fn topic(&self) -> &str {
         &self.topic
