@@ -338,10 +338,13 @@ fn a_missing_file_is_no_device_and_not_mcap_is_corrupt() {
 }
 
 /// The real bag in shared/realdata (five frames of one man, 16UC1, camera info); skipped when absent (CI clones).
+/// shared/ lies beside the checkout, or where `$SUPINE_SHARED_DIR` says (a worktree elsewhere).
 #[test]
 fn plays_the_real_tue_bag() {
-    let path =
-        Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/realdata/mcap/tue_person_depth_16UC1.mcap");
+    let shared = std::env::var_os("SUPINE_SHARED_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared"));
+    let path = shared.join("realdata/mcap/tue_person_depth_16UC1.mcap");
     if !path.is_file() {
         eprintln!("shared/realdata not available: skipped");
         return;

@@ -216,6 +216,8 @@ fn serve(stream: TcpStream, shared: &Shared) -> Result<(), Error> {
         shared,
         subscribed: false,
     };
+    // The callback's signature is tungstenite's (its error type is large, not ours to box).
+    #[allow(clippy::result_large_err)]
     let callback = |req: &Request, mut resp: Response| -> Result<Response, ErrorResponse> {
         let offered = req
             .headers()
