@@ -20,7 +20,7 @@ use supine_drivers::source::{DepthSource, SourceErrorKind};
 use crate::failure::Failure;
 use crate::foxglove::FrameRecord;
 use crate::foxglove::live::{self, LiveView};
-use crate::foxglove::outputs::FoxgloveOutputs;
+use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
 use crate::output::{self, Output};
 use crate::{note, numbers};
 
@@ -135,14 +135,15 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         }
         None => None,
     };
-    if let (Some(v), Some(secs)) = (&live, args.view_wait)
+    let record_file = record_out.as_mut().map(Output::take_file);
+    // Replay records every frame (the loop waits for the writer); the service drops frames instead.
+    let mut outputs = FoxgloveOutputs::new(record_file, live, None, Pace::Lossless)
+        .map_err(|e| anyhow::anyhow!("--record: {e}"))?;
+    if let (Some(v), Some(secs)) = (outputs.live(), args.view_wait)
         && !v.wait_for_subscriber(Duration::from_secs(secs as u64))
     {
         note!("supine replay: no viewer subscribed within {secs} s; playing anyway");
     }
-    let record_file = record_out.as_mut().map(Output::take_file);
-    let mut outputs =
-        FoxgloveOutputs::new(record_file, live, None).map_err(|e| anyhow::anyhow!("--record: {e}"))?;
 
     let limit = args.frames.map_or(u64::MAX, u64::from);
     let bar = progress(total.map(|t| t.min(limit)));
@@ -190,9 +191,8 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     }
     bar.finish_and_clear();
     let frames = latencies.len();
-    let recorded = outputs.frames_recorded();
-    let live_stats = match outputs.finish() {
-        Ok(s) => s,
+    let report = match outputs.finish() {
+        Ok(r) => r,
         Err(e) => {
             let kept = record_out.map(Output::abandon).unwrap_or(None);
             return Err(output::with_partial(anyhow::anyhow!("--record: {e}"), kept).into());
@@ -217,9 +217,12 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         format!("{:.3} / {:.3}", p50.unwrap_or(f64::NAN), p99.unwrap_or(f64::NAN)),
     );
     if let Some(p) = &args.record {
-        row("recorded", format!("{recorded} frames to {}", p.display()));
+        row(
+            "recorded",
+            format!("{} frames to {}", report.recorded, p.display()),
+        );
     }
-    if let Some(s) = &live_stats {
+    if let Some(s) = &report.live {
         row(
             "live view",
             format!(
@@ -237,8 +240,8 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
             "latency_ms_p50": p50,
             "latency_ms_p99": p99,
             "tracked_fraction": serde_json::Value::Null,
-            "recorded_frames": args.record.as_ref().map(|_| recorded),
-            "live_view": live_stats.map(|s| serde_json::json!({
+            "recorded_frames": args.record.as_ref().map(|_| report.recorded),
+            "live_view": report.live.map(|s| serde_json::json!({
                 "connections": s.connections, "queued": s.queued, "dropped": s.dropped
             })),
             "recording": args.file.display().to_string(),

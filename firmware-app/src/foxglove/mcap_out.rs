@@ -18,7 +18,6 @@ pub struct McapRecorder<W: Write + Seek> {
     channels: BTreeMap<Topic, u16>,
     sequence: u32,
     last_log_ns: Option<u64>,
-    frames: u64,
 }
 
 /// Why the recording failed (I/O, or a log time that went back).
@@ -71,7 +70,6 @@ impl<W: Write + Seek> McapRecorder<W> {
             channels,
             sequence: 0,
             last_log_ns: None,
-            frames: 0,
         })
     }
 
@@ -96,13 +94,7 @@ impl<W: Write + Seek> McapRecorder<W> {
             self.writer.write_to_known_channel(&header, data).map_err(err)?;
         }
         self.last_log_ns = Some(frame.log_ns);
-        self.frames += 1;
         Ok(())
-    }
-
-    /// Frames written so far.
-    pub fn frames(&self) -> u64 {
-        self.frames
     }
 
     /// Write the summary and footer and give the output back.

@@ -4,7 +4,8 @@ use serde_json::{Value, json};
 use supine_core::geometry::{Isometry3, Point3};
 use supine_core::salient::SalientPoint;
 
-use super::{FrameMessages, FrameRecord, Topic};
+use super::owned::OwnedFrame;
+use super::{FrameMessages, Topic};
 use crate::wire::json as wire_json;
 
 /// The camera's frame id (optical frame: x right, y down, z forward).
@@ -16,7 +17,7 @@ pub const ROBOT_BASE_FRAME: &str = "robot_base";
 
 /// Encode one frame's messages at log time `log_ns`; `robot_base_from_camera` places the camera when calibrated.
 pub fn encode_frame(
-    record: &FrameRecord<'_>,
+    record: &OwnedFrame,
     log_ns: u64,
     robot_base_from_camera: Option<&Isometry3>,
 ) -> FrameMessages {
@@ -30,14 +31,14 @@ pub fn encode_frame(
         Topic::Transforms,
         transforms(record, &stamp, robot_base_from_camera),
     );
-    for m in record.packets {
+    for m in &record.packets {
         push(Topic::Packets, wire_json::message(m));
     }
     push(
         Topic::Tracker,
         json!({
             "timestamp": stamp,
-            "frame": record.depth.index,
+            "frame": record.index,
             "capture_us": record.capture.as_us(),
             "state": record.state.map(|s| s.name()),
             "packets": record.packets.len(),
@@ -62,8 +63,8 @@ fn rgba(r: f32, g: f32, b: f32, a: f32) -> Value {
     json!({ "r": r, "g": g, "b": b, "a": a })
 }
 
-fn depth_image(record: &FrameRecord<'_>, stamp: &Value) -> Value {
-    let px = record.depth.depth_mm();
+fn depth_image(record: &OwnedFrame, stamp: &Value) -> Value {
+    let px = &record.depth_mm;
     let mut bytes = Vec::with_capacity(px.len() * 2);
     for d in px {
         bytes.extend_from_slice(&d.to_le_bytes());
@@ -71,15 +72,15 @@ fn depth_image(record: &FrameRecord<'_>, stamp: &Value) -> Value {
     json!({
         "timestamp": stamp,
         "frame_id": CAMERA_FRAME,
-        "width": record.depth.width(),
-        "height": record.depth.height(),
+        "width": record.width,
+        "height": record.height,
         "encoding": "16UC1",
-        "step": record.depth.width() as u32 * 2,
+        "step": record.width as u32 * 2,
         "data": base64(&bytes),
     })
 }
 
-fn calibration(record: &FrameRecord<'_>, stamp: &Value) -> Value {
+fn calibration(record: &OwnedFrame, stamp: &Value) -> Value {
     let k = &record.intrinsics;
     let (fx, fy, cx, cy) = (k.fx as f64, k.fy as f64, k.cx as f64, k.cy as f64);
     json!({
@@ -134,15 +135,11 @@ const SALIENT_RGB: [(f32, f32, f32); SalientPoint::COUNT] = [
     (1.0, 0.6, 0.0),
 ];
 
-fn scene(record: &FrameRecord<'_>, stamp: &Value) -> Value {
+fn scene(record: &OwnedFrame, stamp: &Value) -> Value {
     let mut entities = Vec::new();
     if let Some(torso) = &record.torso {
-        let s = &torso.surface;
-        let points: Vec<Value> = s.vertices().iter().map(xyz).collect();
-        let mut indices = Vec::with_capacity(s.triangle_count() * 3);
-        for t in 0..s.triangle_count() {
-            indices.extend(s.triangle(t));
-        }
+        let points: Vec<Value> = torso.vertices.iter().map(xyz).collect();
+        let indices: Vec<u32> = torso.triangles.iter().flatten().copied().collect();
         let mesh = json!({
             "pose": identity_pose(),
             "points": points,
@@ -204,7 +201,7 @@ fn transform(stamp: &Value, parent: &str, child: &str, parent_from_child: &Isome
     })
 }
 
-fn transforms(record: &FrameRecord<'_>, stamp: &Value, robot_base_from_camera: Option<&Isometry3>) -> Value {
+fn transforms(record: &OwnedFrame, stamp: &Value, robot_base_from_camera: Option<&Isometry3>) -> Value {
     let mut list = Vec::new();
     if let Some(t) = robot_base_from_camera {
         list.push(transform(stamp, ROBOT_BASE_FRAME, CAMERA_FRAME, t));

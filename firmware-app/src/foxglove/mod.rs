@@ -13,6 +13,7 @@ pub mod live;
 pub mod mcap_out;
 mod messages;
 pub mod outputs;
+pub mod owned;
 pub mod schemas;
 
 use supine_core::camera::Intrinsics;

@@ -17,7 +17,15 @@ use supine_drivers::source::{DepthSource, SourceErrorKind};
 use super::live::LiveView;
 use super::mcap_out::McapRecorder;
 use super::messages::base64;
+use super::owned::OwnedFrame;
 use super::*;
+
+/// [`encode_frame`] of a borrowed record, as the outputs thread does after the copy.
+fn encode(r: &FrameRecord<'_>, log_ns: u64, base: Option<&Isometry3>) -> FrameMessages {
+    let mut owned = OwnedFrame::default();
+    owned.copy_from(r);
+    encode_frame(&owned, log_ns, base)
+}
 
 fn repo(path: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("..").join(path)
@@ -202,7 +210,7 @@ fn frame_messages_carry_the_foxglove_fields() {
             return;
         }
         seen += 1;
-        let m = encode_frame(r, 5_000_000_123, Some(&robot_base_from_camera()));
+        let m = encode(r, 5_000_000_123, Some(&robot_base_from_camera()));
         let get = |t: Topic| -> Value {
             let (_, data) = m.items.iter().find(|(topic, _)| *topic == t).unwrap();
             serde_json::from_slice(data).unwrap()
@@ -269,11 +277,10 @@ fn mcap_recording_of_the_demo_reads_back_with_schemas_counts_and_monotonic_times
     let mut clock = LogClock::default();
     let base = robot_base_from_camera();
     let frames = record_demo(|r| {
-        let m = encode_frame(r, clock.log_ns(r.capture), Some(&base));
+        let m = encode(r, clock.log_ns(r.capture), Some(&base));
         recorder.write(&m).unwrap();
     });
     assert_eq!(frames, 60);
-    assert_eq!(recorder.frames(), 60);
     let bytes = recorder.finish().unwrap().into_inner();
     if let Some(path) = std::env::var_os("SUPINE_KEEP_MCAP") {
         std::fs::write(&path, &bytes).unwrap();
@@ -298,6 +305,61 @@ fn mcap_recording_of_the_demo_reads_back_with_schemas_counts_and_monotonic_times
     }
     let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
     assert_eq!(summary.stats.unwrap().message_count, 360);
+}
+
+fn temp_file(name: &str) -> PathBuf {
+    std::env::temp_dir().join(format!("supine-foxglove-{}-{name}", std::process::id()))
+}
+
+#[test]
+fn outputs_record_every_frame_losslessly_on_their_own_thread() {
+    use super::outputs::{FoxgloveOutputs, Pace};
+    let path = temp_file("lossless.mcap");
+    let file = std::fs::File::create(&path).unwrap();
+    let mut outputs =
+        FoxgloveOutputs::new(Some(file), None, Some(robot_base_from_camera()), Pace::Lossless).unwrap();
+    assert!(outputs.wanted());
+    let frames = record_demo(|r| outputs.frame(r));
+    let report = outputs.finish().unwrap();
+    assert_eq!((report.recorded, report.dropped), (frames as u64, 0));
+    let bytes = std::fs::read(&path).unwrap();
+    std::fs::remove_file(&path).unwrap();
+    let summary = mcap::Summary::read(&bytes).unwrap().unwrap();
+    // Five per-frame channels plus one health packet per frame.
+    assert_eq!(summary.stats.unwrap().message_count, 6 * frames as u64);
+}
+
+#[test]
+fn outputs_for_the_service_drop_frames_instead_of_waiting() {
+    use super::outputs::{FoxgloveOutputs, Pace, QUEUE_FRAMES};
+    let path = temp_file("drop.mcap");
+    let file = std::fs::File::create(&path).unwrap();
+    let mut outputs = FoxgloveOutputs::new(Some(file), None, None, Pace::DropWhenBusy).unwrap();
+    // The demo 3 times over as fast as the copies go: the encoder (a few ms a frame) cannot keep up, so frames
+    // drop; every frame is either recorded or counted as dropped.
+    let mut handed = 0u64;
+    for _ in 0..3 {
+        record_demo(|r| {
+            outputs.frame(r);
+            handed += 1;
+        });
+    }
+    let report = outputs.finish().unwrap();
+    std::fs::remove_file(&path).unwrap();
+    assert_eq!(report.recorded + report.dropped, handed, "{report:?}");
+    assert!(report.recorded >= QUEUE_FRAMES as u64, "{report:?}");
+}
+
+#[test]
+fn outputs_with_nobody_watching_encode_nothing() {
+    use super::outputs::{FoxgloveOutputs, Pace};
+    let live = LiveView::bind("127.0.0.1:0".parse().unwrap()).unwrap();
+    let mut outputs = FoxgloveOutputs::new(None, Some(live), None, Pace::DropWhenBusy).unwrap();
+    assert!(!outputs.wanted());
+    record_demo(|r| outputs.frame(r));
+    let report = outputs.finish().unwrap();
+    assert_eq!(report.recorded, 0);
+    assert_eq!(report.live.unwrap().queued, 0);
 }
 
 #[test]
@@ -353,7 +415,7 @@ fn live_view_serves_subscribed_channels_and_drops_for_slow_clients() {
     // and publish never waits.
     let mut clock = LogClock::default();
     let started = std::time::Instant::now();
-    record_demo(|r| live.publish(encode_frame(r, clock.log_ns(r.capture), None)));
+    record_demo(|r| live.publish(encode(r, clock.log_ns(r.capture), None)));
     let publish_time = started.elapsed();
     let stats = live.stats();
     assert_eq!(stats.queued + stats.dropped, 60, "{stats:?}");
