@@ -4,7 +4,7 @@ checks serverInfo and the advertised channels (topics, schema names, JSON schema
 and checks the message-data frames that arrive: opcode 1, a known subscription id, log times increasing per channel,
 JSON payloads (the depth image decodes to w*h*2 bytes).
 
-Usage: check_live_view.py ws://HOST:PORT --frames N [--connect-timeout S]
+Usage: foxglove_live_view.py ws://HOST:PORT --frames N [--connect-timeout S]
 Exit 0 when N depth frames arrived and every check held, 1 otherwise (one line per failed check).
 """
 
@@ -47,10 +47,10 @@ def main():
     with open_ws(args.url, args.connect_timeout) as ws:
         failures, counts = check(ws, args.frames)
     for f_ in failures:
-        print(f"check_live_view: {f_}")
+        print(f"foxglove_live_view: {f_}")
     if not failures:
         per = ", ".join(f"{t} {n}" for t, n in sorted(counts.items()))
-        print(f"check_live_view: {args.url}: ok ({per})")
+        print(f"foxglove_live_view: {args.url}: ok ({per})")
     return 1 if failures else 0
 
 
@@ -86,7 +86,7 @@ def check(ws, frames):
         if isinstance(msg, str):
             op = json.loads(msg).get("op")
             if op == "status":
-                print(f"check_live_view: server status: {msg}")
+                print(f"foxglove_live_view: server status: {msg}")
                 continue
             failures.append(f"unexpected text message {op!r}")
             continue

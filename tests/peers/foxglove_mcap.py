@@ -3,7 +3,7 @@
 package and check what Foxglove relies on: every channel's schema name and encoding, message counts per channel,
 log times that never go back, and decodable payloads (the depth image's base64 is w*h*2 bytes).
 
-Usage: check_mcap.py FILE --frames N [--overlays]
+Usage: foxglove_mcap.py FILE --frames N [--overlays]
   --frames N    messages expected on each per-frame channel
   --overlays    the scene must hold the torso mesh, salient points and probe, and the transforms camera->torso
 Exit 0 when every check holds, 1 with one line per failed check otherwise.
@@ -97,10 +97,10 @@ def main():
         if counts.get("/packets", 0) < args.frames:
             failures.append(f"/packets: {counts.get('/packets', 0)} messages, at least {args.frames} expected")
     for f_ in failures:
-        print(f"check_mcap: {args.file}: {f_}")
+        print(f"foxglove_mcap: {args.file}: {f_}")
     if not failures:
         per = ", ".join(f"{t} {n}" for t, n in sorted(counts.items()))
-        print(f"check_mcap: {args.file}: ok ({per})")
+        print(f"foxglove_mcap: {args.file}: ok ({per})")
     return 1 if failures else 0
 
 
