@@ -246,21 +246,23 @@ pub fn decode_camera_info(data: &[u8]) -> Result<Intrinsics, SourceError> {
     for v in &mut k {
         *v = r.f64()?;
     }
-    let positive = |v: f64| v.is_finite() && v > 0.0;
-    if !(positive(k[0]) && positive(k[4]) && k[2].is_finite() && k[5].is_finite()) {
+    // Checked as the f32 the pipeline uses: a tiny or huge f64 must not become 0 or infinity.
+    let (fx, fy, cx, cy) = (k[0] as f32, k[4] as f32, k[2] as f32, k[5] as f32);
+    let positive = |v: f32| v.is_finite() && v > 0.0;
+    if !(positive(fx) && positive(fy) && cx.is_finite() && cy.is_finite()) {
         return Err(corrupt(format!(
-            "camera info with focal lengths {} and {}",
-            k[0], k[4]
+            "camera info with focal lengths {} and {}, principal point ({}, {})",
+            k[0], k[4], k[2], k[5]
         )));
     }
     if width == 0 || height == 0 || width > MAX_SIDE || height > MAX_SIDE {
         return Err(corrupt(format!("camera info image size {width}x{height}")));
     }
     Ok(Intrinsics {
-        fx: k[0] as f32,
-        fy: k[4] as f32,
-        cx: k[2] as f32,
-        cy: k[5] as f32,
+        fx,
+        fy,
+        cx,
+        cy,
         width: width as u16,
         height: height as u16,
     })
@@ -438,6 +440,21 @@ mod tests {
         msg[4 + 16..4 + 20].copy_from_slice(&100_000u32.to_le_bytes());
         let e = decode_depth_image(&msg, &mut Vec::new()).unwrap_err();
         assert!(e.to_string().contains("image size"), "{e}");
+    }
+
+    #[test]
+    fn camera_info_with_a_focal_length_that_is_zero_as_f32_is_corrupt() {
+        let k = Intrinsics {
+            fx: 1.0,
+            ..Intrinsics::KINECT_V1
+        };
+        let mut msg = encode_camera_info(1, "cam", &k);
+        // K[0] is at payload offset 88 (after the header, the size, the model name and 5 distortion f64s).
+        let at = 4 + 88;
+        assert_eq!(f64::from_le_bytes(msg[at..at + 8].try_into().unwrap()), 1.0);
+        msg[at..at + 8].copy_from_slice(&1e-300f64.to_le_bytes());
+        let e = decode_camera_info(&msg).unwrap_err();
+        assert!(e.to_string().contains("focal lengths"), "{e}");
     }
 
     #[test]
