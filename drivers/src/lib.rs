@@ -15,6 +15,7 @@ pub mod oni;
 #[cfg(feature = "openni2")]
 pub mod openni2;
 pub mod recording;
+pub mod ros_bag;
 pub mod source;
 pub mod tracker_host;
 pub mod v4l2;

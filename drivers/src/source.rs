@@ -18,7 +18,8 @@
 //! for people. Messages for the frequent kinds (timeouts) are static strings, so even the error path does not allocate.
 //!
 //! # Opening by name
-//! [`SourceSpec`] parses the CLI strings `openni2[:URI]`, `freenect[:INDEX]`, `v4l2:/dev/videoN` and `file:PATH`;
+//! [`SourceSpec`] parses the CLI strings `openni2[:URI]`, `freenect[:INDEX]`, `v4l2:/dev/videoN`, `file:PATH` (an .oni
+//! recording, or a ROS 2 bag when PATH ends in `.mcap`) and `mcap:PATH[#/TOPIC]` (a ROS 2 bag's depth topic);
 //! [`open`] turns a spec into a boxed source, with a clear error when a backend was not compiled in.
 
 use std::borrow::Cow;
@@ -208,6 +209,23 @@ pub enum SourceSpec {
         /// File path.
         path: PathBuf,
     },
+    /// `mcap:PATH[#/TOPIC]` (or `file:PATH.mcap`): a depth topic of a ROS 2 bag ([`crate::ros_bag::McapSource`]).
+    Mcap {
+        /// File path.
+        path: PathBuf,
+        /// The image topic; `None` = the bag's only depth-like topic.
+        topic: Option<String>,
+    },
+}
+
+impl SourceSpec {
+    /// The file a file source reads (`file:` and `mcap:`), `None` for devices.
+    pub fn file_path(&self) -> Option<&std::path::Path> {
+        match self {
+            SourceSpec::File { path } | SourceSpec::Mcap { path, .. } => Some(path),
+            _ => None,
+        }
+    }
 }
 
 impl FromStr for SourceSpec {
@@ -222,7 +240,8 @@ impl FromStr for SourceSpec {
             SourceError::new(
                 SourceErrorKind::InvalidArgument,
                 format!(
-                    "bad source {s:?}: {why} (expected openni2[:URI], freenect[:INDEX], v4l2:/dev/videoN or file:PATH)"
+                    "bad source {s:?}: {why} (expected openni2[:URI], freenect[:INDEX], v4l2:/dev/videoN, file:PATH \
+                     or mcap:PATH[#/TOPIC])"
                 ),
             )
         };
@@ -244,10 +263,25 @@ impl FromStr for SourceSpec {
                 _ => Err(bad("v4l2 needs a device path, e.g. v4l2:/dev/video0")),
             },
             "file" => match rest {
+                Some(path) if !path.is_empty() && crate::ros_bag::is_mcap_path(path.as_ref()) => {
+                    Ok(SourceSpec::Mcap {
+                        path: PathBuf::from(path),
+                        topic: None,
+                    })
+                }
                 Some(path) if !path.is_empty() => Ok(SourceSpec::File {
                     path: PathBuf::from(path),
                 }),
                 _ => Err(bad("file needs a path, e.g. file:recording.oni")),
+            },
+            "mcap" => match rest {
+                Some(rest) if !rest.is_empty() && !rest.starts_with('#') => {
+                    let (path, topic) = crate::ros_bag::split_topic(rest);
+                    Ok(SourceSpec::Mcap { path, topic })
+                }
+                _ => Err(bad(
+                    "mcap needs a path, e.g. mcap:bag.mcap or mcap:bag.mcap#/camera/depth/image_raw",
+                )),
             },
             "" => Err(bad("empty source")),
             other => Err(bad(&format!("unknown source type {other:?}"))),
@@ -263,6 +297,11 @@ impl fmt::Display for SourceSpec {
             SourceSpec::Freenect { index } => write!(f, "freenect:{index}"),
             SourceSpec::V4l2 { path } => write!(f, "v4l2:{}", path.display()),
             SourceSpec::File { path } => write!(f, "file:{}", path.display()),
+            SourceSpec::Mcap { path, topic: None } => write!(f, "mcap:{}", path.display()),
+            SourceSpec::Mcap {
+                path,
+                topic: Some(topic),
+            } => write!(f, "mcap:{}#{topic}", path.display()),
         }
     }
 }
@@ -286,6 +325,10 @@ pub fn open(spec: &SourceSpec) -> Result<Box<dyn DepthSource>, SourceError> {
 pub fn open_with(spec: &SourceSpec, options: &OpenOptions) -> Result<Box<dyn DepthSource>, SourceError> {
     match spec {
         SourceSpec::File { path } => Ok(Box::new(crate::oni::OniReader::open(path)?)),
+        SourceSpec::Mcap { path, topic } => Ok(Box::new(crate::ros_bag::McapSource::open(
+            path,
+            topic.as_deref(),
+        )?)),
         SourceSpec::V4l2 { path } => {
             let calibration = options
                 .v4l2_calibration
@@ -366,6 +409,32 @@ mod tests {
     }
 
     #[test]
+    fn mcap_specs_by_scheme_or_extension() {
+        assert_eq!(
+            "file:bags/a.MCAP".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Mcap {
+                path: "bags/a.MCAP".into(),
+                topic: None
+            }
+        );
+        assert_eq!(
+            "mcap:a#1.mcap#/cam/depth".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Mcap {
+                path: "a#1.mcap".into(),
+                topic: Some("/cam/depth".into())
+            }
+        );
+        // A `#` not followed by a topic's leading `/` belongs to the path.
+        assert_eq!(
+            "mcap:a#b.mcap".parse::<SourceSpec>().unwrap(),
+            SourceSpec::Mcap {
+                path: "a#b.mcap".into(),
+                topic: None
+            }
+        );
+    }
+
+    #[test]
     fn display_round_trips() {
         for s in [
             "openni2",
@@ -373,6 +442,8 @@ mod tests {
             "freenect:1",
             "v4l2:/dev/video0",
             "file:x.oni",
+            "mcap:x.mcap",
+            "mcap:a#b.mcap#/camera/depth/image_raw",
         ] {
             assert_eq!(s.parse::<SourceSpec>().unwrap().to_string(), s);
         }
@@ -386,6 +457,8 @@ mod tests {
             ("file:", "needs a path"),
             ("kinect:0", "unknown source type \"kinect\""),
             ("", "empty"),
+            ("mcap:", "mcap needs a path"),
+            ("mcap:#/depth", "mcap needs a path"),
         ] {
             let e = s.parse::<SourceSpec>().unwrap_err();
             assert_eq!(e.kind(), SourceErrorKind::InvalidArgument);

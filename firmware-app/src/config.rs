@@ -15,7 +15,8 @@ use toml::Spanned;
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
-    /// Depth source (SOURCE syntax: `openni2[:URI]`, `freenect[:INDEX]`, `v4l2:/dev/videoN`, `file:PATH`).
+    /// Depth source (SOURCE syntax: `openni2[:URI]`, `freenect[:INDEX]`, `v4l2:/dev/videoN`, `file:PATH`,
+    /// `mcap:PATH[#/TOPIC]`).
     pub source: Spanned<String>,
     /// With a `file:` source, play the recording again from the start instead of ending the run.
     #[serde(default)]
@@ -197,7 +198,9 @@ pub fn parse(text: &str, path: &Path) -> Result<Checked, ConfigError> {
         at(
             raw.source.span(),
             "source",
-            format!("{e} (allowed: openni2[:URI], freenect[:INDEX], v4l2:/dev/videoN, file:PATH)"),
+            format!(
+                "{e} (allowed: openni2[:URI], freenect[:INDEX], v4l2:/dev/videoN, file:PATH, mcap:PATH[#/TOPIC])"
+            ),
         )
     })?;
     let link: LinkSpec = raw.link.get_ref().parse().map_err(|e| {

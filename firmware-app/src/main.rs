@@ -9,6 +9,7 @@ mod config;
 mod console;
 mod demo;
 mod failure;
+mod foxglove;
 mod info;
 mod links;
 mod model_dirs;
@@ -18,9 +19,11 @@ mod numbers;
 mod output;
 mod pipeline;
 mod record;
+mod replay;
 mod run;
 mod service;
 mod truth;
+mod watchdog;
 mod wire;
 
 use clap::{Parser, Subcommand};
@@ -48,6 +51,8 @@ enum Command {
     Run(run::RunArgs),
     /// Camera-to-robot extrinsic from arm states paired with the probe tip seen in depth (or from recorded pairs).
     Calibrate(calibrate::CalibrateArgs),
+    /// Play a recording (.oni or a ROS 2 MCAP depth bag) through the per-frame path; record or view it in Foxglove.
+    Replay(replay::ReplayArgs),
     /// Record a depth stream to an .oni file (plays in libOpenNI2 and `supine replay`).
     Record(record::RecordArgs),
     /// Show the models, depth devices and links this build and machine offer.
@@ -128,6 +133,7 @@ fn main() -> std::process::ExitCode {
         Command::Demo(args) => demo::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Record(args) => record::run(args),
+        Command::Replay(args) => replay::run(args),
         Command::Run(args) => run::run(args),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),

@@ -51,11 +51,9 @@ pub fn run(args: RecordArgs) -> Result<(), Failure> {
     let options = OpenOptions {
         v4l2_calibration: args.v4l2_calibration,
     };
-    let inputs: Vec<(&str, &std::path::Path)> = match &spec {
-        SourceSpec::File { path } => vec![("--source", path.as_path())],
-        _ => Vec::new(),
-    };
-    if let SourceSpec::File { path } = &spec
+    let inputs: Vec<(&str, &std::path::Path)> =
+        spec.file_path().map(|p| ("--source", p)).into_iter().collect();
+    if let Some(path) = spec.file_path()
         && std::fs::metadata(path).is_ok_and(|m| !m.is_file())
     {
         return Err(anyhow::anyhow!("--source {}: not a regular file", path.display()).into());
@@ -63,9 +61,9 @@ pub fn run(args: RecordArgs) -> Result<(), Failure> {
     // Checked and created before the source is opened: an unwritable --out fails at start.
     let mut out = Output::create("--out", &args.out, &inputs)?;
     // A file source's error already names its path; other sources are named by their spec.
-    let mut src = source::open_with(&spec, &options).map_err(|e| match &spec {
-        SourceSpec::File { .. } => anyhow::anyhow!("--source: {e}"),
-        _ => anyhow::anyhow!("opening {spec}: {e}"),
+    let mut src = source::open_with(&spec, &options).map_err(|e| match spec.file_path() {
+        Some(_) => anyhow::anyhow!("--source: {e}"),
+        None => anyhow::anyhow!("opening {spec}: {e}"),
     })?;
     let k = src.intrinsics();
     let file = std::io::BufWriter::with_capacity(1 << 20, out.take_file());
@@ -140,9 +138,9 @@ fn record(
                 }
             }
             Err(e) => {
-                return Err(match spec {
-                    SourceSpec::File { .. } => anyhow::anyhow!("--source: {e}"),
-                    _ => anyhow::anyhow!("reading {spec}: {e}"),
+                return Err(match spec.file_path() {
+                    Some(_) => anyhow::anyhow!("--source: {e}"),
+                    None => anyhow::anyhow!("reading {spec}: {e}"),
                 }
                 .into());
             }

@@ -1,7 +1,7 @@
 //! `supine wire …`: see, decode and send the wire protocol without any tracking running.
 
 mod decode;
-mod json;
+pub mod json;
 mod listen;
 mod sample;
 mod send;

@@ -1,0 +1,122 @@
+//! `supine replay`: the committed recording to MCAP, the live view's flags, and the errors a user meets (a topic
+//! for an .oni file, an MCAP without depth images, an output over the input, a missing file).
+
+mod common;
+
+use common::{demo_recording, scratch, supine};
+
+fn text(b: &[u8]) -> String {
+    String::from_utf8_lossy(b).into_owned()
+}
+
+#[test]
+fn replay_records_the_demo_to_mcap_and_reports_json() {
+    let dir = scratch("replay-record");
+    let out = supine()
+        .current_dir(&dir)
+        .arg("replay")
+        .arg(demo_recording())
+        .args(["--record", "demo.mcap", "--json", "r.json", "--frames", "12"])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let mcap = std::fs::read(dir.join("demo.mcap")).unwrap();
+    assert_eq!(&mcap[..8], b"\x89MCAP0\r\n");
+    assert_eq!(
+        &mcap[mcap.len() - 8..],
+        b"\x89MCAP0\r\n",
+        "a finished file ends with the magic"
+    );
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
+    assert_eq!(report["frames"], 12);
+    assert_eq!(report["recorded_frames"], 12);
+    assert_eq!(report["corrupt_frames"], 0);
+    assert!(report["tracked_fraction"].is_null(), "no tracker ran: no figure");
+    assert!(
+        text(&out.stdout).contains("12 frames to demo.mcap"),
+        "{}",
+        text(&out.stdout)
+    );
+
+    // The recording is Foxglove's, not a ROS 2 depth bag: replaying it says what it holds instead.
+    let again = supine()
+        .current_dir(&dir)
+        .args(["replay", "demo.mcap"])
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again.stderr));
+    let err = text(&again.stderr);
+    assert!(
+        err.contains("no CDR sensor_msgs/msg/Image topic") && err.contains("/depth"),
+        "{err}"
+    );
+}
+
+#[test]
+fn a_topic_for_an_oni_file_is_a_usage_error() {
+    let out = supine()
+        .arg("replay")
+        .arg(demo_recording())
+        .args(["--topic", "/camera/depth/image_raw"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("--topic is for ROS 2 bags"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn record_over_the_input_and_a_missing_file_are_refused() {
+    let dir = scratch("replay-refused");
+    let input = common::copy_recording(&dir, "in.oni");
+    let out = supine()
+        .current_dir(&dir)
+        .args(["replay", "in.oni", "--record", "in.oni"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(
+        text(&out.stderr).contains("refusing to write over an input"),
+        "{}",
+        text(&out.stderr)
+    );
+    assert_eq!(
+        std::fs::read(&input).unwrap(),
+        std::fs::read(demo_recording()).unwrap()
+    );
+
+    let out = supine()
+        .current_dir(&dir)
+        .args(["replay", "nothere.mcap"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    assert!(
+        text(&out.stderr).contains("nothere.mcap"),
+        "{}",
+        text(&out.stderr)
+    );
+}
+
+#[test]
+fn view_flags_are_checked() {
+    let out = supine()
+        .arg("replay")
+        .arg(demo_recording())
+        .args(["--view", "nowhere"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(text(&out.stderr).contains("HOST:PORT"), "{}", text(&out.stderr));
+    let out = supine()
+        .arg("replay")
+        .arg(demo_recording())
+        .args(["--view-wait", "3"])
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(2), "--view-wait needs --view");
+}

@@ -1,0 +1,54 @@
+#!/usr/bin/env bash
+# The Foxglove outputs read back by independent Python peers (tests/run.sh runs it as step peer:foxglove; about
+# 15 s once the test step has built everything):
+#  1. the MCAP of the committed demo with ground-truth overlays (written by the foxglove unit test) and the MCAPs
+#     of `supine replay --record` on the demo recording and on the real ROS 2 bag in shared/ (when present), read
+#     by the `mcap` package: schemas, counts, monotonic log times (foxglove_mcap.py);
+#  2. the live view of `supine replay --view` read by a `websockets` client (foxglove_live_view.py).
+# Needs the venv of tests/setup.sh (mcap, websockets); shared/ is beside the checkout or at $SUPINE_SHARED_DIR.
+# Usage: tests/peers/foxglove.sh [PATH-TO-SUPINE-BINARY]
+set -euo pipefail
+cd "$(dirname "$0")/../.."
+root=$(pwd)
+py=${SUPINE_PYTHON:-$root/.venv/bin/python}
+peers=$root/tests/peers
+# Under tests/run.sh (SUPINE_PEERS=1) reuse the test step's --all-features build instead of building another.
+features=()
+if [[ -n ${SUPINE_PEERS:-} ]]; then features=(--all-features); fi
+if [[ $# -ge 1 ]]; then
+    supine=$1
+else
+    cargo build -q -p supine "${features[@]}"
+    supine=$root/target/debug/supine
+fi
+tmp=$(mktemp -d)
+viewer=
+cleanup() {
+    if [[ -n $viewer ]]; then kill "$viewer" 2>/dev/null || true; fi
+    rm -rf "$tmp"
+}
+trap cleanup EXIT
+
+SUPINE_KEEP_MCAP=$tmp/overlays.mcap cargo test -q -p supine "${features[@]}" mcap_recording_of_the_demo >/dev/null
+"$py" "$peers/foxglove_mcap.py" "$tmp/overlays.mcap" --frames 60 --overlays
+
+"$supine" replay models/artifacts/demo/sequence.oni --record "$tmp/demo.mcap" >/dev/null
+"$py" "$peers/foxglove_mcap.py" "$tmp/demo.mcap" --frames 60
+
+bag=${SUPINE_SHARED_DIR:-$root/../shared}/realdata/mcap/tue_person_depth_16UC1.mcap
+if [[ -f $bag ]]; then
+    "$supine" replay "$bag" --record "$tmp/tue.mcap" >/dev/null
+    "$py" "$peers/foxglove_mcap.py" "$tmp/tue.mcap" --frames 5
+else
+    echo "foxglove: shared/realdata not available: the ROS 2 bag replay is skipped"
+fi
+
+# A free port: bind 0, read it, release it (the replay binds it a moment later).
+port=$("$py" -c 'import socket; s = socket.socket(); s.bind(("127.0.0.1", 0)); print(s.getsockname()[1])')
+"$supine" replay models/artifacts/demo/sequence.oni --realtime --view "127.0.0.1:$port" --view-wait 60 \
+    >"$tmp/replay.out" 2>&1 &
+viewer=$!
+"$py" "$peers/foxglove_live_view.py" "ws://127.0.0.1:$port" --frames 20
+wait "$viewer" || { cat "$tmp/replay.out"; echo "foxglove: replay --view failed"; exit 1; }
+viewer=
+echo "foxglove: ok"
