@@ -28,6 +28,7 @@ fn the_shape_path_allocates_nothing_per_frame() {
         trees: 2,
         em_rounds: 0,
         holdout_validation: false,
+        hip_heights: false,
     };
     let trained = train(&ds, &cfg, None).unwrap();
     let shape = ShapeModelView::parse(&trained.bytes).unwrap();

@@ -33,6 +33,9 @@ pub struct TrainShapeArgs {
     /// Trees of the shape forest.
     #[arg(long, default_value_t = 16)]
     pub trees: usize,
+    /// Measure canonical heights from the hip centre (format-1 behaviour) instead of the mattress plane.
+    #[arg(long)]
+    pub hip_heights: bool,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -69,7 +72,7 @@ pub struct EvalShapeArgs {
     /// Residual unit of Eq. 7, millimetres.
     #[arg(long, default_value_t = 10.0)]
     pub length_unit_mm: f32,
-    /// Starts of the plain model fit.
+    /// Starts of the plain model fit (0 skips the plain fit).
     #[arg(long, default_value_t = 5)]
     pub plain_starts: usize,
     /// Use at most this many bodies (0 = all).
@@ -78,6 +81,13 @@ pub struct EvalShapeArgs {
     /// Evaluate on `test` (default) or on the `validation` part of the training bodies (for choices).
     #[arg(long, default_value = "test")]
     pub split: String,
+    /// Salient points for every method: `noisy` (ground truth plus --point-noise-mm per axis) or `forest` (the
+    /// joint forest's estimate on each frame).
+    #[arg(long, default_value = "noisy")]
+    pub points: String,
+    /// Joint forest for `--points forest` [default: models/artifacts/joints.jfor].
+    #[arg(long)]
+    pub joint_forest: Option<PathBuf>,
     /// Write the report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -106,6 +116,7 @@ pub fn run_train(a: &TrainShapeArgs) -> Result<()> {
         trees: a.trees,
         em_rounds: 1,
         holdout_validation: a.holdout_validation,
+        hip_heights: a.hip_heights,
     };
     let t = train(&ds, &cfg, a.png.as_deref())?;
     let out = a.out.clone().unwrap_or_else(super::default_artifact_path);
@@ -141,6 +152,8 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         plain_starts: a.plain_starts,
         max_bodies: a.max_bodies,
         split: a.split.clone(),
+        points: a.points.clone(),
+        joint_forest: a.joint_forest.clone(),
     };
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);
