@@ -88,6 +88,9 @@ pub struct EvalShapeArgs {
     /// Joint forest for `--points forest` [default: models/artifacts/joints.jfor].
     #[arg(long)]
     pub joint_forest: Option<PathBuf>,
+    /// Weight of the bed-contact residual of the `combined_bed` method.
+    #[arg(long, default_value_t = 1.0)]
+    pub bed_weight: f32,
     /// Write the report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -154,6 +157,7 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         split: a.split.clone(),
         points: a.points.clone(),
         joint_forest: a.joint_forest.clone(),
+        bed_weight: a.bed_weight,
     };
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);
@@ -204,21 +208,30 @@ fn print_table(r: &serde_json::Value) {
         r["torso_coeffs"], r["images"], r["seed"], r["commit"]
     );
     println!(
-        "{:<14} {:>4} {:>44} {:>10} {:>7} {:>10} {:>9} {:>9}",
-        "method", "n", "coeff NRMSE s0..s4", "vertex mm", "sd mm", "hip-al. mm", "ms/frame", "rejected"
+        "{:<18} {:>4} {:>34} {:>9} {:>11} {:>7} {:>10} {:>9} {:>9}",
+        "method",
+        "n",
+        "coeff NRMSE s0..s4",
+        "raw mm",
+        "aligned mm",
+        "sd mm",
+        "hip-al. mm",
+        "ms/frame",
+        "rejected"
     );
-    for m in ["subspace", "fitting", "combined", "mean_shape"] {
+    for m in ["subspace", "fitting", "combined", "combined_bed", "mean_shape"] {
         for (label, j) in [(m.to_string(), &r[m]), (format!("{m}+arm"), &r[m]["with_arm"])] {
             let c: Vec<String> = (0..5)
                 .map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN)))
                 .collect();
             println!(
-                "{:<14} {:>4} {:>44} {:>10.1} {:>7.1} {:>10.1} {:>9.1} {:>9.3}",
+                "{:<18} {:>4} {:>34} {:>9.1} {:>11.1} {:>7.1} {:>10.1} {:>9.1} {:>9.3}",
                 label,
                 j["frames"],
                 c.join(" "),
                 j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
-                j["vertex_error_mm_sd"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_aligned_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_aligned_mm_sd"].as_f64().unwrap_or(f64::NAN),
                 j["vertex_error_hip_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["ms_per_frame"].as_f64().unwrap_or(f64::NAN),
                 j["rejected_fraction"].as_f64().unwrap_or(f64::NAN)
@@ -228,9 +241,10 @@ fn print_table(r: &serde_json::Value) {
     if let Some(m) = r["multi_frame"].as_array() {
         for j in m {
             println!(
-                "multi-frame N={:<3} vertex {:.1} mm  s1 NRMSE {:.3}",
+                "multi-frame N={:<3} vertex raw {:.1} mm  aligned {:.1} mm  s1 NRMSE {:.3}",
                 j["views"],
                 j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+                j["vertex_error_aligned_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["coeff_nrmse"][1].as_f64().unwrap_or(f64::NAN)
             );
         }

@@ -11,7 +11,7 @@ use nalgebra::{Point3, Vector3};
 use std::time::Instant;
 use supine_core::body_model::BodyModelView;
 use supine_core::depth::DepthFrame;
-use supine_core::fit::{FitParams, fit_shape, initial_pose};
+use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
 use supine_core::forest::model::ForestView;
 use supine_core::icp::IcpParams;
@@ -236,6 +236,8 @@ pub struct EvalConfig {
     pub points: String,
     /// Joint forest file for `points = forest` (default: the committed one).
     pub joint_forest: Option<std::path::PathBuf>,
+    /// Weight of the bed-contact residual of `combined_bed` (see `supine_core::fit::BedContact`).
+    pub bed_weight: f32,
 }
 
 /// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients (`n` of them, none for 0).
@@ -287,10 +289,10 @@ pub fn evaluate(
     if cfg.max_bodies > 0 {
         bodies.truncate(cfg.max_bodies);
     }
-    let names = ["subspace", "fitting", "combined", "mean_shape"];
-    let mut all: Vec<Stats> = vec![Stats::default(); 4];
-    let mut arm: Vec<Stats> = vec![Stats::default(); 4];
-    let mut no_arm: Vec<Stats> = vec![Stats::default(); 4];
+    let names = ["subspace", "fitting", "combined", "mean_shape", "combined_bed"];
+    let mut all: Vec<Stats> = vec![Stats::default(); names.len()];
+    let mut arm: Vec<Stats> = vec![Stats::default(); names.len()];
+    let mut no_arm: Vec<Stats> = vec![Stats::default(); names.len()];
     let ns = [1usize, 2, 4, 8, 12];
     let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
     let mut canonical = vec![0.0f32; shape.pixels()];
@@ -365,6 +367,27 @@ pub fn evaluate(
                 .ok()
             });
             let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
+            // Combined with the bed-contact term.
+            let t3 = Instant::now();
+            let contact = BedContact {
+                weight: cfg.bed_weight,
+                height_m: 0.0,
+            };
+            let on_bed = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
+                fit_shape_on_bed(
+                    &body,
+                    &frame,
+                    &k,
+                    &est.shape,
+                    pose0,
+                    &p,
+                    &contact,
+                    &mut subset,
+                    &mut normals,
+                )
+                .ok()
+            });
+            let ms_bed = t3.elapsed().as_secs_f64() * 1e3;
             // Plain fitting: several starts from the mean, the best residual wins.
             let t2 = Instant::now();
             let mut pp = FitParams::plain(icp);
@@ -386,15 +409,17 @@ pub fn evaluate(
                 best.map(|r| r.association),
                 combined.map(|r| r.association),
                 None,
+                on_bed.map(|r| r.association),
             ];
-            let results: [Option<[f32; 20]>; 4] = [
+            let results: [Option<[f32; 20]>; 5] = [
                 Some(est.shape),
                 best.map(|r| r.shape),
                 combined.map(|r| r.shape),
                 Some([0.0; 20]),
+                on_bed.map(|r| r.shape),
             ];
-            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0];
-            for m in 0..4 {
+            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed];
+            for m in 0..names.len() {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
                     vec![&mut all, &mut arm]
                 } else if f.with_arm {

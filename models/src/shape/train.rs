@@ -383,9 +383,12 @@ mod tests {
             plain_starts: 2,
             max_bodies: 1,
             split: "test".into(),
+            points: "noisy".into(),
+            joint_forest: None,
+            bed_weight: 1.0,
         };
         let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
-        for m in ["subspace", "fitting", "combined"] {
+        for m in ["subspace", "fitting", "combined", "combined_bed"] {
             let v = r[m]["vertex_error_mm_mean"].as_f64().unwrap();
             assert!(v.is_finite() && v > 0.0 && v < 300.0, "{m}: {v} mm");
             assert_eq!(r[m]["coeff_nrmse"].as_array().unwrap().len(), 20);
