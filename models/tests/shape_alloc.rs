@@ -101,7 +101,10 @@ fn the_shape_path_allocates_nothing_per_frame() {
                 f.mattress.signed_distance(&p)
             })
             .fold(f32::INFINITY, f32::min);
-        assert!(lowest.abs() < 0.02, "lowest torso vertex {lowest} m from the mattress");
+        assert!(
+            lowest.abs() < 0.02,
+            "lowest torso vertex {lowest} m from the mattress"
+        );
         fitted_on_bed += 1;
     }
     assert!(fitted_on_bed > 0, "no frame was fitted on the bed");

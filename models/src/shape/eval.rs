@@ -497,6 +497,8 @@ pub fn evaluate(
     report["multi_frame"] = serde_json::Value::Array(
         ns.iter()
             .zip(&multi)
+            // N beyond the dataset's views per body has no frames.
+            .filter(|(_, s)| s.n > 0)
             .map(|(n, s)| {
                 let mut j = s.json();
                 j["views"] = (*n).into();

@@ -302,7 +302,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     // Choice on the validation bodies: the leaf size.
     let mut choices = Vec::new();
     let mut best = (f32::INFINITY, 5usize);
-    for min_leaf in [2usize, 5, 10, 20] {
+    for min_leaf in [2usize, 5, 10, 20, 40] {
         let fc = ForestConfig {
             trees: cfg.trees,
             min_leaf,
