@@ -91,6 +91,9 @@ pub struct EvalShapeArgs {
     /// Weight of the bed-contact residual of the `combined_bed` method.
     #[arg(long, default_value_t = 1.0)]
     pub bed_weight: f32,
+    /// Coefficients the combined fit leaves nearly free (Λ = 1e-3), comma-separated [default: torso_coeffs].
+    #[arg(long, value_delimiter = ',')]
+    pub free_coeffs: Option<Vec<usize>>,
     /// Write the report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -148,6 +151,10 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
     };
     let path = a.model.clone().unwrap_or_else(super::default_artifact_path);
     let bytes = std::fs::read(&path).with_context(|| format!("reading shape model {}", path.display()))?;
+    anyhow::ensure!(
+        a.free_coeffs.iter().flatten().all(|&c| c < 20),
+        "--free-coeffs must name coefficients 0..19"
+    );
     let cfg = EvalConfig {
         seed: a.seed,
         point_noise_m: a.point_noise_mm * 1e-3,
@@ -158,6 +165,7 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         points: a.points.clone(),
         joint_forest: a.joint_forest.clone(),
         bed_weight: a.bed_weight,
+        free_coeffs: a.free_coeffs.clone(),
     };
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);

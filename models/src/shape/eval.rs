@@ -238,6 +238,8 @@ pub struct EvalConfig {
     pub joint_forest: Option<std::path::PathBuf>,
     /// Weight of the bed-contact residual of `combined_bed` (see `supine_core::fit::BedContact`).
     pub bed_weight: f32,
+    /// Coefficients the combined fits leave nearly free (small Λ); `None` = `torso_coeffs`, as the paper did.
+    pub free_coeffs: Option<Vec<usize>>,
 }
 
 /// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients (`n` of them, none for 0).
@@ -351,7 +353,7 @@ pub fn evaluate(
             per_view.push(est.shape);
             // Combined: fit from the subspace estimate.
             let t1 = Instant::now();
-            let mut p = FitParams::combined(icp, &torso);
+            let mut p = FitParams::combined(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso));
             p.length_unit_m = cfg.length_unit_m;
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
                 fit_shape(
@@ -481,6 +483,7 @@ pub fn evaluate(
         "split": cfg.split,
         "estimate_failures": failures,
         "points": cfg.points,
+        "free_coeffs": cfg.free_coeffs.clone().unwrap_or_else(|| torso.clone()),
         "point_error_mm_mean": if point_errors.1 > 0 { point_errors.0 / point_errors.1 as f64 * 1000.0 } else { f64::NAN },
         "config": cfg,
         "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,

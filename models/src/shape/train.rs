@@ -386,6 +386,7 @@ mod tests {
             points: "noisy".into(),
             joint_forest: None,
             bed_weight: 1.0,
+            free_coeffs: None,
         };
         let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
         for m in ["subspace", "fitting", "combined", "combined_bed"] {
