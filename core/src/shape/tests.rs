@@ -230,3 +230,19 @@ fn a_forest_whose_child_points_backwards_is_rejected() {
         Err(ModelFileError::InvalidData { .. })
     ));
 }
+
+#[test]
+fn the_height_reference_is_read_and_an_unknown_one_rejected() {
+    let mut buf = [0u8; TINY_SHAPE_LEN];
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, None).unwrap();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.camera().height_reference, HeightReference::HipCentre);
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, Some(1)).unwrap();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.camera().height_reference, HeightReference::Mattress);
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, Some(7)).unwrap();
+    assert!(matches!(
+        ShapeModelView::parse(&buf[..n]),
+        Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"CREF"
+    ));
+}
