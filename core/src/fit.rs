@@ -14,7 +14,7 @@
 //! 20x20 outer product per pair: about 1 ms for 1.2 k points on one desktop core; nothing allocates (the caller
 //! lends the shaped-subset buffer).
 
-use crate::body_model::{BodyModelView, SHAPE_COMPONENTS};
+use crate::body_model::{BodyModelView, BodyPart, SHAPE_COMPONENTS};
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::error::BufferLenError;
@@ -167,6 +167,53 @@ pub fn subset_normals(body: &BodyModelView<'_>, points: &[[f32; 3]], normals: &m
     }
 }
 
+/// The bed-contact term of [`fit_shape_on_bed`]: the patient's back rests on the mattress, so the lowest torso
+/// vertex (chest, abdomen, pelvis) of the shaped, rigidly placed model is held at `height_m` above the mattress
+/// plane of [`IcpParams::mattress`]. The front surface alone cannot tell a thick body from a thin one shifted toward
+/// the camera (rigid ICP absorbs thickness as a translation); the bed pins the back, so the front's height above it
+/// is the body's thickness.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BedContact {
+    /// Weight of the contact residual against the data term (which is a mean over pairs: 1 weighs the contact like
+    /// one average pair of the whole term).
+    pub weight: f32,
+    /// Height above the mattress plane at which the lowest torso vertex rests (metres; 0 = touching).
+    pub height_m: f32,
+}
+
+impl Default for BedContact {
+    fn default() -> Self {
+        BedContact {
+            weight: 1.0,
+            height_m: 0.0,
+        }
+    }
+}
+
+/// The lowest torso vertex of shape `s` (raw) placed by `camera_from_model` and its height above `mattress`.
+fn lowest_torso_vertex(
+    body: &BodyModelView<'_>,
+    s: &[f32; SHAPE_COMPONENTS],
+    camera_from_model: &Isometry3,
+    mattress: &crate::geometry::Plane,
+) -> Option<(usize, f32)> {
+    let mut best: Option<(usize, f32)> = None;
+    for v in 0..body.vertex_count() {
+        if !matches!(
+            body.part_of_vertex(v),
+            BodyPart::Chest | BodyPart::Abdomen | BodyPart::Pelvis
+        ) {
+            continue;
+        }
+        let p = *camera_from_model * Point3::from(body.shape_vertex(v, s));
+        let h = mattress.signed_distance(&p);
+        if best.is_none_or(|(_, b)| h < b) {
+            best = Some((v, h));
+        }
+    }
+    best
+}
+
 /// Alternate rigid ICP and Eq. 7 shape steps from shape `z0` (σ units, also the prior) and pose
 /// `camera_from_model`. `points` and `normals` are scratch for the shaped torso subset and its outward normals
 /// (`body.counts().subset` entries each).
@@ -178,6 +225,59 @@ pub fn fit_shape(
     z0: &[f32; SHAPE_COMPONENTS],
     camera_from_model: Isometry3,
     params: &FitParams,
+    points: &mut [[f32; 3]],
+    normals: &mut [[f32; 3]],
+) -> Result<FitResult, FitError> {
+    fit(
+        body,
+        frame,
+        k,
+        z0,
+        camera_from_model,
+        params,
+        None,
+        points,
+        normals,
+    )
+}
+
+/// [`fit_shape`] with the bed-contact term: after each round's ICP steps the model is moved along the mattress
+/// normal until its lowest torso vertex rests at `contact.height_m`, and the shape step holds that vertex there
+/// (one more residual, weighted by `contact.weight`). Extra cost: shaping the torso vertices once per round.
+#[allow(clippy::too_many_arguments)] // as fit_shape, plus the contact
+pub fn fit_shape_on_bed(
+    body: &BodyModelView<'_>,
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    z0: &[f32; SHAPE_COMPONENTS],
+    camera_from_model: Isometry3,
+    params: &FitParams,
+    contact: &BedContact,
+    points: &mut [[f32; 3]],
+    normals: &mut [[f32; 3]],
+) -> Result<FitResult, FitError> {
+    fit(
+        body,
+        frame,
+        k,
+        z0,
+        camera_from_model,
+        params,
+        Some(contact),
+        points,
+        normals,
+    )
+}
+
+#[allow(clippy::too_many_arguments)] // see fit_shape
+fn fit(
+    body: &BodyModelView<'_>,
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    z0: &[f32; SHAPE_COMPONENTS],
+    camera_from_model: Isometry3,
+    params: &FitParams,
+    contact: Option<&BedContact>,
     points: &mut [[f32; 3]],
     normals: &mut [[f32; 3]],
 ) -> Result<FitResult, FitError> {
@@ -204,6 +304,17 @@ pub fn fit_shape(
                 .map_err(FitError::Icp)?
                 .0;
         }
+        let bed = params.icp.mattress;
+        let lowest = match contact {
+            Some(c) => {
+                let found = lowest_torso_vertex(body, &raw(body, &z), &pose, &bed);
+                if let Some((_, h)) = found {
+                    pose.translation.vector += bed.normal() * (c.height_m - h);
+                }
+                found.map(|(v, _)| (v, c))
+            }
+            None => None,
+        };
         let model_from_camera = pose.inverse();
         let mut a = [[0.0f32; SHAPE_COMPONENTS]; SHAPE_COMPONENTS];
         let mut b = [0.0f32; SHAPE_COMPONENTS];
@@ -245,6 +356,23 @@ pub fn fit_shape(
                 *ay *= inv_n;
             }
             a[x][x] += params.lambda + params.prior_weight[x];
+        }
+        if let Some((v, c)) = lowest {
+            // Residual (target height − height of the mean-shape vertex) / u, linear in z like the pairs'.
+            let n = pose.rotation.inverse() * bed.normal();
+            let m = Point3::from(body.shape_vertex(v, &[]));
+            let r = (c.height_m - bed.signed_distance(&(pose * m))) / u;
+            body.row_basis(v, &mut basis);
+            let mut j = [0.0f32; SHAPE_COMPONENTS];
+            for (q, jq) in j.iter_mut().enumerate() {
+                *jq = n.dot(&Vector3::from(basis[q])) * body.sigma(q) / u;
+            }
+            for x in 0..SHAPE_COMPONENTS {
+                b[x] += c.weight * j[x] * r;
+                for y in 0..=x {
+                    a[x][y] += c.weight * j[x] * j[y];
+                }
+            }
         }
         if !solve_spd(&mut a, &mut b) {
             return Err(FitError::Singular);

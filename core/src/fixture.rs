@@ -234,6 +234,11 @@ pub fn shape_mean(pixel: usize) -> f32 {
 
 /// Write the tiny shape model (8x6 canonical view, 20 eigen-images, two trees) into `out`; returns its length.
 pub fn tiny_shape_model(out: &mut [u8]) -> Result<usize, WriteError> {
+    tiny_shape_model_with_reference(out, None)
+}
+
+/// [`tiny_shape_model`] with a `CREF` section holding `cref` (none for `None`).
+pub fn tiny_shape_model_with_reference(out: &mut [u8], cref: Option<u32>) -> Result<usize, WriteError> {
     use crate::shape::{FORMAT_VERSION, KIND};
     const P: usize = SHAPE_W * SHAPE_H;
     let head = [SHAPE_W as u32, SHAPE_H as u32, 1, 2];
@@ -276,25 +281,28 @@ pub fn tiny_shape_model(out: &mut [u8]) -> Result<usize, WriteError> {
         elem,
         bytes,
     };
-    model_file::write(
-        KIND,
-        FORMAT_VERSION,
-        &[
-            s(b"HEAD", ElemType::U32, &h[..16]),
-            s(b"CAMR", ElemType::F32, &c),
-            s(b"MEAN", ElemType::F32, &mean),
-            s(b"EIGS", ElemType::I16, &eigs),
-            s(b"ESCL", ElemType::F32, &escl),
-            s(b"EPRI", ElemType::F32, &epri),
-            s(b"TREE", ElemType::U32, &tree[..8]),
-            s(b"NFEA", ElemType::U16, &nfea[..8]),
-            s(b"NTHR", ElemType::F32, &nthr),
-            s(b"NCHL", ElemType::U32, &nchl[..16]),
-            s(b"LEAF", ElemType::I16, &leaf),
-            s(b"LSCL", ElemType::F32, &lscl),
-        ],
-        out,
-    )
+    let cref_bytes = cref.unwrap_or(0).to_le_bytes();
+    let sections = [
+        s(b"HEAD", ElemType::U32, &h[..16]),
+        s(b"CAMR", ElemType::F32, &c),
+        s(b"MEAN", ElemType::F32, &mean),
+        s(b"EIGS", ElemType::I16, &eigs),
+        s(b"ESCL", ElemType::F32, &escl),
+        s(b"EPRI", ElemType::F32, &epri),
+        s(b"TREE", ElemType::U32, &tree[..8]),
+        s(b"NFEA", ElemType::U16, &nfea[..8]),
+        s(b"NTHR", ElemType::F32, &nthr),
+        s(b"NCHL", ElemType::U32, &nchl[..16]),
+        s(b"LEAF", ElemType::I16, &leaf),
+        s(b"LSCL", ElemType::F32, &lscl),
+        s(b"CREF", ElemType::U32, &cref_bytes),
+    ];
+    let n = if cref.is_some() {
+        sections.len()
+    } else {
+        sections.len() - 1
+    };
+    model_file::write(KIND, FORMAT_VERSION, &sections[..n], out)
 }
 
 fn le_u32(xs: &[u32]) -> [u8; 16] {

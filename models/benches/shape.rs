@@ -15,7 +15,8 @@ use supine_models::shape::data::{frames_of, intrinsics, small_dataset};
 fn bench(c: &mut Criterion) {
     let dir = std::env::temp_dir().join(format!("supine-shape-bench-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
-    let ds = small_dataset(&dir, 1, 2, 4).expect("bench frame");
+    // Two bodies: the dataset generator refuses a split that leaves the train or the test part empty.
+    let ds = small_dataset(&dir, 2, 2, 4).expect("bench frame");
     let bytes =
         std::fs::read(supine_models::shape::default_artifact_path()).expect("models/artifacts/shape.ssm");
     let shape = ShapeModelView::parse(&bytes).expect("valid shape model");

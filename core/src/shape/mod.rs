@@ -16,6 +16,7 @@
 //! NCHL u32  n_nodes  left child (right = left + 1) of an internal node, the leaf row of a leaf
 //! LEAF i16  L·20     leaf shape vectors (σ units), quantised
 //! LSCL f32  20       dequantisation scale of each output
+//! CREF u32  1        optional: canonical height reference (0 hip centre, 1 mattress; absent = 0)
 //! ```
 //! Host-only sections (`INFO`: the training report) are ignored here.
 //!
@@ -32,7 +33,7 @@ use crate::depth::DepthFrame;
 use crate::geometry::{Isometry3, Plane, Point3};
 use crate::model_file::{ModelFile, ModelFileError, Tag};
 use crate::salient::SalientPoint;
-use canonical::{CanonicalCamera, DegenerateFrame};
+use canonical::{CanonicalCamera, DegenerateFrame, HeightReference};
 use forest::ShapeForest;
 use subspace::{ProjectError, SUBSPACE_DIM, Subspace};
 
@@ -95,6 +96,12 @@ impl<'a> ShapeModelView<'a> {
             max_height_m: cam.at(7),
             below_mattress_m: cam.at(8),
             stride: stride as u16,
+            height_reference: match file.typed::<u32>(*b"CREF", Some(1)) {
+                Err(ModelFileError::MissingSection { .. }) => HeightReference::HipCentre,
+                Err(e) => return Err(e),
+                Ok(c) => HeightReference::from_code(c.at(0))
+                    .ok_or(invalid(b"CREF", "unknown canonical height reference"))?,
+            },
         };
         let mean = file.typed::<f32>(*b"MEAN", Some(pixels))?;
         let basis = file.typed::<i16>(*b"EIGS", Some(pixels * SUBSPACE_DIM))?;

@@ -1,6 +1,6 @@
 //! Tests of the canonical view, the masked projection, the forest and the `SHAP` file view.
 
-use super::canonical::{CanonicalCamera, NO_VALUE, body_frame, canonical_view};
+use super::canonical::{CanonicalCamera, HeightReference, NO_VALUE, body_frame, canonical_view};
 use super::*;
 use crate::fixture::{self, SHAPE_H, SHAPE_LEAF_SCALE, SHAPE_LEAVES, SHAPE_W, TINY_SHAPE_LEN};
 use crate::geometry::Vector3;
@@ -60,11 +60,30 @@ fn canonical_view_of_a_plane_and_a_box_is_exact() {
         }
     }
     let frame = DepthFrame::new(&depth, W as u16, H as u16, Timestamp::default(), 0).unwrap();
-    let cam = CanonicalCamera::with_pitch(0.05, 1);
-    let t = body_frame(&pts, &bed.normal()).unwrap();
+    // The mattress lies 0.1 m below the hips: heights above it are those above the hips plus 0.1 m.
+    for (reference, offset) in [
+        (HeightReference::HipCentre, 0.0f32),
+        (HeightReference::Mattress, 0.1),
+    ] {
+        let mut cam = CanonicalCamera::with_pitch(0.05, 1);
+        cam.height_reference = reference;
+        check_plane_and_box(&frame, &k, &pts, &bed, &cam, offset);
+    }
+}
+
+/// The canonical view of the plane-and-box frame shows exactly the plane and the box (heights shifted by `offset`).
+fn check_plane_and_box(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    pts: &[Point3; SalientPoint::COUNT],
+    bed: &Plane,
+    cam: &CanonicalCamera,
+    offset: f32,
+) {
+    let t = body_frame(pts, &bed.normal()).unwrap();
     let mut out = [0.0f32; 28 * 20];
     assert_eq!(cam.pixels(), out.len());
-    let visible = canonical_view(&frame, &k, &t, &bed, &cam, &mut out).unwrap();
+    let visible = canonical_view(frame, k, &t, bed, cam, &mut out).unwrap();
     assert!(visible > 200, "visible {visible}");
     let (mut on_box, mut on_plane) = (0, 0);
     for cv in 0..cam.height as usize {
@@ -74,7 +93,7 @@ fn canonical_view_of_a_plane_and_a_box_is_exact() {
                 continue;
             }
             assert!(
-                (x - 0.05).abs() < 1e-4 || (x - 0.15).abs() < 1e-4,
+                (x - 0.05 - offset).abs() < 1e-4 || (x - 0.15 - offset).abs() < 1e-4,
                 "pixel ({cu}, {cv}) = {x}"
             );
             // Where the pixel centre of either surface lands in the depth image decides what it must show.
@@ -92,18 +111,18 @@ fn canonical_view_of_a_plane_and_a_box_is_exact() {
                 uv.x > 90.0 + m && uv.x < 119.0 - m && uv.y > 40.0 + m && uv.y < 79.0 - m
             };
             if inside(b, 5.0) {
-                assert!((x - 0.15).abs() < 1e-4, "box pixel ({cu}, {cv}) = {x}");
+                assert!((x - 0.15 - offset).abs() < 1e-4, "box pixel ({cu}, {cv}) = {x}");
                 on_box += 1;
             }
             if !inside(seen(0.05), -5.0) && !inside(b, -5.0) {
-                assert!((x - 0.05).abs() < 1e-4, "plane pixel ({cu}, {cv}) = {x}");
+                assert!((x - 0.05 - offset).abs() < 1e-4, "plane pixel ({cu}, {cv}) = {x}");
                 on_plane += 1;
             }
         }
     }
     assert!(on_box >= 4 && on_plane > 100, "box {on_box}, plane {on_plane}");
     // The wrong buffer size is an error.
-    assert!(canonical_view(&frame, &k, &t, &bed, &cam, &mut out[..10]).is_err());
+    assert!(canonical_view(frame, k, &t, bed, cam, &mut out[..10]).is_err());
 }
 
 fn tiny() -> ([u8; TINY_SHAPE_LEN], usize) {
@@ -209,5 +228,21 @@ fn a_forest_whose_child_points_backwards_is_rejected() {
     assert!(matches!(
         ShapeModelView::parse(&out[..m]),
         Err(ModelFileError::InvalidData { .. })
+    ));
+}
+
+#[test]
+fn the_height_reference_is_read_and_an_unknown_one_rejected() {
+    let mut buf = [0u8; TINY_SHAPE_LEN];
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, None).unwrap();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.camera().height_reference, HeightReference::HipCentre);
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, Some(1)).unwrap();
+    let m = ShapeModelView::parse(&buf[..n]).unwrap();
+    assert_eq!(m.camera().height_reference, HeightReference::Mattress);
+    let n = fixture::tiny_shape_model_with_reference(&mut buf, Some(7)).unwrap();
+    assert!(matches!(
+        ShapeModelView::parse(&buf[..n]),
+        Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"CREF"
     ));
 }

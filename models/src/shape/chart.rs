@@ -1,6 +1,6 @@
 //! Fig. 5-style bar charts as PNGs (no text: the report's table carries the numbers). Groups along x, one bar per
 //! method in each: subspace blue, fitting orange, combined green; a grey grid line every 0.1 (coefficients) or
-//! 5 mm (vertex error).
+//! 2 mm (vertex error).
 
 use anyhow::Result;
 use std::path::Path;

@@ -31,6 +31,8 @@ pub struct ShapeFrame {
     pub noisy_points: [Point3<f32>; 6],
     /// Flat mattress plane (camera frame, normal up).
     pub mattress: Plane,
+    /// Mattress and head-section planes (camera frame), what the tracker's clip keeps points above.
+    pub clip_planes: [Plane; 2],
     /// True shape coefficients (σ units).
     pub shape: [f32; 20],
     /// Whether the robot arm is in view.
@@ -77,6 +79,7 @@ pub fn frames_of(rec: &BodyRecord, k: &Intrinsics, seed: u64, noise_m: f32) -> V
                 truth_points,
                 noisy_points,
                 mattress: v.truth.planes_camera[1],
+                clip_planes: crate::forest::data::view_planes(&v.truth),
                 shape,
                 with_arm: v.truth.probe.is_some(),
                 occluded_fraction: v.truth.occluded_fraction,

@@ -5,13 +5,15 @@
 //!
 //! Cost per frame: subspace ~3 ms, combined fit ~10 ms, plain fit 5 starts, plus four posings (LBS) for the errors.
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Point3, Vector3};
 use std::time::Instant;
 use supine_core::body_model::BodyModelView;
 use supine_core::depth::DepthFrame;
-use supine_core::fit::{FitParams, fit_shape, initial_pose};
+use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::model::ForestView;
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
 use supine_core::time::Timestamp;
@@ -19,6 +21,8 @@ use supine_core::time::Timestamp;
 use super::data::{ShapeFrame, body_pose, frames_of, intrinsics};
 use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
 use crate::dataset::Dataset;
+use crate::forest::data::clip_for;
+use crate::forest::train::image_seed;
 use crate::pose::Pose;
 
 /// Coefficients (by index) whose variation lies mostly on the torso: each one's share of the torso subset's
@@ -77,6 +81,8 @@ pub struct Stats {
     v_n: f64,
     h_sum: f64,
     h_sq: f64,
+    a_sum: f64,
+    a_sq: f64,
     ms: f64,
     ms_n: usize,
     rejected: usize,
@@ -88,10 +94,15 @@ pub struct Stats {
 }
 
 impl Stats {
-    fn add(&mut self, est: &[f32; 20], truth: &[f32; 20], vertex_err: &[f32], hip_err: &[f32]) {
+    fn add(&mut self, est: &[f32; 20], truth: &[f32; 20], errs: &VertexErrors) {
+        let (vertex_err, hip_err) = (&errs.raw, &errs.hip);
         for &e in hip_err {
             self.h_sum += e as f64;
             self.h_sq += (e as f64).powi(2);
+        }
+        for &e in &errs.aligned {
+            self.a_sum += e as f64;
+            self.a_sq += (e as f64).powi(2);
         }
         self.n += 1;
         for k in 0..20 {
@@ -116,7 +127,11 @@ impl Stats {
         let vsd = (self.v_sq / self.v_n.max(1.0) - vm * vm).max(0.0).sqrt();
         let hm = self.h_sum / self.v_n.max(1.0);
         let hsd = (self.h_sq / self.v_n.max(1.0) - hm * hm).max(0.0).sqrt();
+        let am = self.a_sum / self.v_n.max(1.0);
+        let asd = (self.a_sq / self.v_n.max(1.0) - am * am).max(0.0).sqrt();
         serde_json::json!({
+            "vertex_error_aligned_mm_mean": am * 1000.0,
+            "vertex_error_aligned_mm_sd": asd * 1000.0,
             "frames": self.n,
             "vertex_error_hip_mm_mean": hm * 1000.0,
             "vertex_error_hip_mm_sd": hsd * 1000.0,
@@ -133,15 +148,25 @@ impl Stats {
     }
 }
 
-/// Upper-body vertex errors (metres) of `est` against the true posed upper body: as posed in the body frame (no
-/// alignment), and with the estimated body moved so its hip centre meets the true one (how the tracker places it).
+/// Upper-body vertex errors (metres) of one estimate against the true posed upper body.
+pub struct VertexErrors {
+    /// As posed in the body frame, no alignment (the definition).
+    pub raw: Vec<f32>,
+    /// With the estimated body moved so its hip centre meets the true one.
+    pub hip: Vec<f32>,
+    /// With the estimated upper body moved by the least-squares translation (its upper-body centroid onto the
+    /// true one): the shape error without the model-frame offset of the upper body (see `shape_sensitivity`).
+    pub aligned: Vec<f32>,
+}
+
+/// [`VertexErrors`] of `est` (σ units) posed with `pose` against `truth`.
 fn vertex_errors(
     model: &BodyModel,
     pose: &Pose,
     est: &[f32; 20],
     truth: &PosedBody<'_>,
     mask: &[bool],
-) -> (Vec<f32>, Vec<f32>) {
+) -> VertexErrors {
     let posed = model.pose(&Shape::from_normalised(model, est), pose);
     let hip = |b: &PosedBody<'_>| {
         (Vector3::from(b.salient_points[SalientPoint::LeftHip.index()])
@@ -149,20 +174,46 @@ fn vertex_errors(
             * 0.5
     };
     let shift = hip(truth) - hip(&posed);
-    let pairs = posed
+    let pairs: Vec<(Vector3<f32>, Vector3<f32>)> = posed
         .vertices
         .iter()
         .zip(&truth.vertices)
         .zip(mask)
-        .filter(|(_, m)| **m);
-    let raw = pairs
-        .clone()
-        .map(|((a, b), _)| (Vector3::from(*a) - Vector3::from(*b)).norm())
+        .filter(|(_, m)| **m)
+        .map(|((a, b), _)| (Vector3::from(*a), Vector3::from(*b)))
         .collect();
-    let hip_aligned = pairs
-        .map(|((a, b), _)| (Vector3::from(*a) + shift - Vector3::from(*b)).norm())
-        .collect();
-    (raw, hip_aligned)
+    let centroid =
+        pairs.iter().fold(Vector3::zeros(), |acc, (a, b)| acc + (b - a)) / pairs.len().max(1) as f32;
+    VertexErrors {
+        raw: pairs.iter().map(|(a, b)| (a - b).norm()).collect(),
+        hip: pairs.iter().map(|(a, b)| (a + shift - b).norm()).collect(),
+        aligned: pairs.iter().map(|(a, b)| (a + centroid - b).norm()).collect(),
+    }
+}
+
+/// How much 1 σ of each shape coefficient moves the upper body of the rest pose: RMS vertex displacement (mm) as
+/// is, and after removing its mean (the part a translation absorbs). Says which coefficients the vertex error is
+/// made of, and how much of it is a shift of the whole upper body in the model frame.
+pub fn shape_sensitivity(model: &BodyModel, mask: &[bool]) -> Vec<(f64, f64)> {
+    let k = crate::body::COMPONENTS;
+    let verts: Vec<usize> = (0..model.n_vertices).filter(|&v| mask[v]).collect();
+    let n = verts.len().max(1) as f64;
+    (0..k)
+        .map(|j| {
+            let d = |v: usize, c: usize| model.basis[(3 * v + c) * k + j] as f64 * model.sigma[j] as f64;
+            let mut mean = [0.0f64; 3];
+            let mut sq = 0.0;
+            for &v in &verts {
+                for (c, m) in mean.iter_mut().enumerate() {
+                    *m += d(v, c) / n;
+                    sq += d(v, c).powi(2);
+                }
+            }
+            let rms = (sq / n).sqrt();
+            let shift2: f64 = mean.iter().map(|m| m * m).sum();
+            (rms * 1000.0, ((sq / n) - shift2).max(0.0).sqrt() * 1000.0)
+        })
+        .collect()
 }
 
 /// Evaluation settings.
@@ -180,9 +231,18 @@ pub struct EvalConfig {
     pub max_bodies: usize,
     /// Which bodies: "test" or "validation".
     pub split: String,
+    /// Salient points handed to every method: `noisy` (ground truth plus `point_noise_m` per axis) or `forest` (the
+    /// joint forest's refined estimate on the frame, `models/artifacts/joints.jfor` unless given).
+    pub points: String,
+    /// Joint forest file for `points = forest` (default: the committed one).
+    pub joint_forest: Option<std::path::PathBuf>,
+    /// Weight of the bed-contact residual of `combined_bed` (see `supine_core::fit::BedContact`).
+    pub bed_weight: f32,
+    /// Coefficients the combined fits leave nearly free (small Λ); `None` = `torso_coeffs`, as the paper did.
+    pub free_coeffs: Option<Vec<usize>>,
 }
 
-/// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients.
+/// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients (`n` of them, none for 0).
 fn plain_starts(n: usize) -> Vec<[f32; 20]> {
     let mut v = vec![[0.0f32; 20]];
     for (k, s) in [(0, 1.5f32), (0, -1.5), (1, 1.5), (1, -1.5)] {
@@ -190,7 +250,7 @@ fn plain_starts(n: usize) -> Vec<[f32; 20]> {
         z[k] = s;
         v.push(z);
     }
-    v.truncate(n.max(1));
+    v.truncate(n);
     v
 }
 
@@ -202,10 +262,28 @@ pub fn evaluate(
     cfg: &EvalConfig,
 ) -> Result<serde_json::Value> {
     let shape = ShapeModelView::parse(shape_bytes).map_err(|e| anyhow::anyhow!("shape model: {e}"))?;
+    let joint_bytes = match cfg.points.as_str() {
+        "noisy" => None,
+        "forest" => {
+            let path = cfg
+                .joint_forest
+                .clone()
+                .unwrap_or_else(crate::forest::cli::default_path);
+            Some(std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?)
+        }
+        other => anyhow::bail!("--points must be `noisy` or `forest`, not `{other}`"),
+    };
+    let joints = match &joint_bytes {
+        Some(b) => Some(ForestView::parse(b).map_err(|e| anyhow::anyhow!("joint forest: {e}"))?),
+        None => None,
+    };
+    let mut joint_ws = Box::new(Workspace::new());
+    let mut point_errors = (0.0f64, 0usize);
     let body: BodyModelView<'_> = model.view();
     let k = intrinsics(ds);
     let (torso, torso_stats) = torso_coeffs(model, 0.03);
     let mask: Vec<bool> = model.part_of_vertex.iter().map(|&p| upper_body(p)).collect();
+    let sensitivity = shape_sensitivity(model, &mask);
     let mut bodies = match cfg.split.as_str() {
         "validation" => super::data::train_validation(ds).1,
         _ => ds.test.clone(),
@@ -213,10 +291,10 @@ pub fn evaluate(
     if cfg.max_bodies > 0 {
         bodies.truncate(cfg.max_bodies);
     }
-    let names = ["subspace", "fitting", "combined", "mean_shape"];
-    let mut all: Vec<Stats> = vec![Stats::default(); 4];
-    let mut arm: Vec<Stats> = vec![Stats::default(); 4];
-    let mut no_arm: Vec<Stats> = vec![Stats::default(); 4];
+    let names = ["subspace", "fitting", "combined", "mean_shape", "combined_bed"];
+    let mut all: Vec<Stats> = vec![Stats::default(); names.len()];
+    let mut arm: Vec<Stats> = vec![Stats::default(); names.len()];
+    let mut no_arm: Vec<Stats> = vec![Stats::default(); names.len()];
     let ns = [1usize, 2, 4, 8, 12];
     let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
     let mut canonical = vec![0.0f32; shape.pixels()];
@@ -240,7 +318,28 @@ pub fn evaluate(
             images += 1;
             let frame = DepthFrame::new(&f.depth, k.width, k.height, Timestamp::default(), f.view as u32)
                 .map_err(|e| anyhow::anyhow!("dataset frame: {e}"))?;
-            let pts: [Point3<f32>; 6] = f.noisy_points;
+            let pts: [Point3<f32>; 6] = match &joints {
+                None => f.noisy_points,
+                Some(jf) => {
+                    let clip = clip_for(&f.clip_planes, &k);
+                    let ic = InferConfig {
+                        samples: jf.samples_per_frame(),
+                        seed: image_seed(cfg.seed, b, f.view),
+                        method: Method::Refined,
+                    };
+                    let est = estimate(jf, &frame, &k, &clip, &ic, &[None; 6], &mut joint_ws);
+                    if est.iter().any(Option::is_none) {
+                        failures += 1;
+                        continue;
+                    }
+                    let p = est.map(|e| e.map(|e| e.position).unwrap_or(Point3::origin()));
+                    for (e, t) in p.iter().zip(&f.truth_points) {
+                        point_errors.0 += (e - t).norm() as f64;
+                        point_errors.1 += 1;
+                    }
+                    p
+                }
+            };
             let icp = IcpParams::new(f.mattress);
             let up = f.mattress.normal();
             // Subspace regression.
@@ -254,7 +353,7 @@ pub fn evaluate(
             per_view.push(est.shape);
             // Combined: fit from the subspace estimate.
             let t1 = Instant::now();
-            let mut p = FitParams::combined(icp, &torso);
+            let mut p = FitParams::combined(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso));
             p.length_unit_m = cfg.length_unit_m;
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
                 fit_shape(
@@ -270,6 +369,27 @@ pub fn evaluate(
                 .ok()
             });
             let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
+            // Combined with the bed-contact term.
+            let t3 = Instant::now();
+            let contact = BedContact {
+                weight: cfg.bed_weight,
+                height_m: 0.0,
+            };
+            let on_bed = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
+                fit_shape_on_bed(
+                    &body,
+                    &frame,
+                    &k,
+                    &est.shape,
+                    pose0,
+                    &p,
+                    &contact,
+                    &mut subset,
+                    &mut normals,
+                )
+                .ok()
+            });
+            let ms_bed = t3.elapsed().as_secs_f64() * 1e3;
             // Plain fitting: several starts from the mean, the best residual wins.
             let t2 = Instant::now();
             let mut pp = FitParams::plain(icp);
@@ -291,15 +411,17 @@ pub fn evaluate(
                 best.map(|r| r.association),
                 combined.map(|r| r.association),
                 None,
+                on_bed.map(|r| r.association),
             ];
-            let results: [Option<[f32; 20]>; 4] = [
+            let results: [Option<[f32; 20]>; 5] = [
                 Some(est.shape),
                 best.map(|r| r.shape),
                 combined.map(|r| r.shape),
                 Some([0.0; 20]),
+                on_bed.map(|r| r.shape),
             ];
-            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0];
-            for m in 0..4 {
+            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed];
+            for m in 0..names.len() {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
                     vec![&mut all, &mut arm]
                 } else if f.with_arm {
@@ -323,7 +445,7 @@ pub fn evaluate(
                         Some(z) if m != 1 || z.iter().all(|x| x.abs() <= 3.0) => {
                             let e = errs
                                 .get_or_insert_with(|| vertex_errors(model, &pose, &z, &truth_posed, &mask));
-                            s.add(&z, &truth_shape, &e.0, &e.1);
+                            s.add(&z, &truth_shape, e);
                         }
                         _ => s.rejected += 1,
                     }
@@ -343,7 +465,7 @@ pub fn evaluate(
                     };
                 }
                 let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
-                multi[i].add(&z, &truth_shape, &e.0, &e.1);
+                multi[i].add(&z, &truth_shape, &e);
             }
         }
         bar.inc(1);
@@ -353,11 +475,16 @@ pub fn evaluate(
         "torso_coeffs": torso,
         "torso_variance_share": torso_stats.iter().map(|s| s.0).collect::<Vec<_>>(),
         "torso_concentration": torso_stats.iter().map(|s| s.1).collect::<Vec<_>>(),
+        "upper_body_mm_per_sigma": sensitivity.iter().map(|s| s.0).collect::<Vec<_>>(),
+        "upper_body_mm_per_sigma_unshifted": sensitivity.iter().map(|s| s.1).collect::<Vec<_>>(),
         "seed": cfg.seed,
         "images": images,
         "bodies": bodies.len(),
         "split": cfg.split,
         "estimate_failures": failures,
+        "points": cfg.points,
+        "free_coeffs": cfg.free_coeffs.clone().unwrap_or_else(|| torso.clone()),
+        "point_error_mm_mean": if point_errors.1 > 0 { point_errors.0 / point_errors.1 as f64 * 1000.0 } else { f64::NAN },
         "config": cfg,
         "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,
                        "pitch_m": shape.camera().distance_m / shape.camera().focal_px},
@@ -373,6 +500,8 @@ pub fn evaluate(
     report["multi_frame"] = serde_json::Value::Array(
         ns.iter()
             .zip(&multi)
+            // N beyond the dataset's views per body has no frames.
+            .filter(|(_, s)| s.n > 0)
             .map(|(n, s)| {
                 let mut j = s.json();
                 j["views"] = (*n).into();

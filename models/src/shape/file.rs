@@ -116,6 +116,11 @@ pub fn write_shape_model(
         (b"NCHL", ElemType::U32, le(&child, u32::to_le_bytes)),
         (b"LEAF", ElemType::I16, le(&leaf_q, i16::to_le_bytes)),
         (b"LSCL", ElemType::F32, le(&lscl, f32::to_le_bytes)),
+        (
+            b"CREF",
+            ElemType::U32,
+            le(&[cam.height_reference.code()], u32::to_le_bytes),
+        ),
         (b"INFO", ElemType::U8, info.as_bytes().to_vec()),
     ];
     let sections: Vec<SectionData<'_>> = bufs

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::shape::ShapeModelView;
-use supine_core::shape::canonical::{CanonicalCamera, NO_VALUE, body_frame, canonical_view};
+use supine_core::shape::canonical::{CanonicalCamera, HeightReference, NO_VALUE, body_frame, canonical_view};
 use supine_core::shape::subspace::SUBSPACE_DIM;
 use supine_core::time::Timestamp;
 
@@ -42,6 +42,8 @@ pub struct TrainConfig {
     pub em_rounds: usize,
     /// Keep the validation bodies out of the final model too (to score choices such as the pitch on them).
     pub holdout_validation: bool,
+    /// Canonical heights from the hip centre instead of the mattress plane (the format-1 reference, for comparison).
+    pub hip_heights: bool,
 }
 
 /// Canonical images of a set of bodies.
@@ -240,7 +242,10 @@ pub struct Trained {
 
 /// Train a shape model on the training split of `ds`.
 pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> Result<Trained> {
-    let cam = CanonicalCamera::with_pitch(cfg.pitch_m, cfg.stride);
+    let mut cam = CanonicalCamera::with_pitch(cfg.pitch_m, cfg.stride);
+    if cfg.hip_heights {
+        cam.height_reference = HeightReference::HipCentre;
+    }
     let (fit_b, val_b) = train_validation(ds);
     let all: Vec<u32> = if cfg.holdout_validation {
         fit_b.iter().chain(&val_b).copied().collect()
@@ -297,7 +302,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     // Choice on the validation bodies: the leaf size.
     let mut choices = Vec::new();
     let mut best = (f32::INFINITY, 5usize);
-    for min_leaf in [2usize, 5, 10, 20] {
+    for min_leaf in [2usize, 5, 10, 20, 40] {
         let fc = ForestConfig {
             trees: cfg.trees,
             min_leaf,
@@ -363,6 +368,7 @@ mod tests {
             trees: 3,
             em_rounds: 1,
             holdout_validation: false,
+            hip_heights: false,
         };
         let a = train(&ds, &cfg, None).unwrap();
         let b = train(&ds, &cfg, None).unwrap();
@@ -377,9 +383,13 @@ mod tests {
             plain_starts: 2,
             max_bodies: 1,
             split: "test".into(),
+            points: "noisy".into(),
+            joint_forest: None,
+            bed_weight: 1.0,
+            free_coeffs: None,
         };
         let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
-        for m in ["subspace", "fitting", "combined"] {
+        for m in ["subspace", "fitting", "combined", "combined_bed"] {
             let v = r[m]["vertex_error_mm_mean"].as_f64().unwrap();
             assert!(v.is_finite() && v > 0.0 && v < 300.0, "{m}: {v} mm");
             assert_eq!(r[m]["coeff_nrmse"].as_array().unwrap().len(), 20);
