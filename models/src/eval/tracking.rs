@@ -3,9 +3,13 @@
 //! score it against the ground truth, frame by frame.
 //!
 //! Figures (JSON keys in shared/design/cli.md):
-//! - torso surface, salient-point and probe-mapping errors as `supine_core::tracker::accuracy` defines them; the
-//!   true torso is the body model's torso subset with the patient's true shape placed by the true torso pose, the
-//!   arm tip the true probe tip in `robot_base`.
+//! - torso surface error: mean distance from each vertex of the tracked torso model to the true posed torso
+//!   surface of the frame (`torso.bin`), mm; salient-point error; probe mapping: the arm's own state stream
+//!   (`arm.cobs`: latency, encoder noise) mapped through the tracked pose onto the tracked model, against the
+//!   probe truth of the frame (nearest point and signed distance), where the tip is near the body.
+//! - Sequences without `torso.bin` (the committed demo, older ones) are scored as `supine_core::tracker::accuracy`
+//!   does: vertex to vertex against the body model shaped with the true coefficients at the true torso pose.
+//! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm.
 //! - tracked fraction: frames after the init phase whose state carries a pose.
 //! - latency: per-frame processing time on this machine (one thread), p50 and p99.
 //!
@@ -26,6 +30,7 @@ use supine_drivers::clock::MonotonicClock;
 use supine_drivers::oni::OniReader;
 use supine_drivers::tracker_host::{ModelFiles, OwnedTorso, TrackerScratch};
 
+use super::tracking_truth::TrackingTruth;
 use crate::sequence::{FrameTruth, SequenceMeta};
 
 /// Arguments of `supine-models eval tracking`.
@@ -185,6 +190,16 @@ pub fn run_variant(
     let true_surface = truth_torso
         .surface(&models.body)
         .context("true torso surface has the wrong size")?;
+    // Sequences written since the tracking episodes landed carry the true posed torso (torso.bin), probe truth and
+    // the arm's own state stream: scored against those. Older ones (the committed demo) against the shaped model.
+    let full = if seq.dir.join("torso.bin").is_file() {
+        Some(TrackingTruth::load(&seq.dir)?)
+    } else {
+        None
+    };
+    let arm_stream = full.as_ref().and_then(|f| f.arm.as_deref()).unwrap_or(&[]);
+    let mut next_arm = 0usize;
+    let mut newest_arm: Option<ArmSample> = None;
     let mut scores = Vec::with_capacity(seq.truth.len());
     let mut i = 0usize;
     let mut init_frames = None;
@@ -197,11 +212,20 @@ pub fn run_variant(
         let Some(t) = seq.truth.get(i) else {
             bail!("{} has more frames than truth.jsonl", oni.display());
         };
-        let arm = t.world_from_probe.as_ref().map(|m| ArmSample {
-            time: frame.capture,
-            tip_robot_base: Point3::from(isometry_of(m).translation.vector),
-            robot_base_from_probe: isometry_of(m).rotation,
-        });
+        let arm = if full.is_some() {
+            // The newest arm state sent before the frame was captured, as a live link would deliver it.
+            while next_arm < arm_stream.len() && arm_stream[next_arm].time <= frame.capture {
+                newest_arm = Some(arm_stream[next_arm]);
+                next_arm += 1;
+            }
+            newest_arm.filter(|_| t.world_from_probe.is_some())
+        } else {
+            t.world_from_probe.as_ref().map(|m| ArmSample {
+                time: frame.capture,
+                tip_robot_base: Point3::from(isometry_of(m).translation.vector),
+                robot_base_from_probe: isometry_of(m).rotation,
+            })
+        };
         let r: FrameReport = tracker.process(&frame, arm.as_ref(), &clock);
         if init_frames.is_none() && tracker.state() != TrackerState::Initialising {
             init_frames = Some(i as u32 + 1);
@@ -213,7 +237,19 @@ pub fn run_variant(
             occluded: t.torso_occluded_fraction,
             ..FrameScore::default()
         };
-        if let (Some(pose), Some(surface)) = (r.camera_from_torso, tracker.surface()) {
+        if let (Some(pose), Some(surface), Some(tt)) = (r.camera_from_torso, tracker.surface(), full.as_ref()) {
+            let estimated: Vec<[f32; 3]> = surface.vertices().iter().map(|v| (pose * v).coords.into()).collect();
+            s.torso_mm = Some(tt.torso_surface_error_mm(&estimated, i as u32)?);
+            if let Some(p) = r.salient_camera {
+                s.point_mm = Some(tt.point_error_mm(&p.map(|q| q.coords.into()), i as u32)?.mean_mm);
+            }
+            if let Some(m) = r.probe
+                && let Some(e) = tt.probe_error_of_mapping(&m, &pose, i as u32)?
+            {
+                s.probe_mm = Some(e.position_mm);
+                s.probe_distance_mm = Some(e.signed_distance_mm);
+            }
+        } else if let (Some(pose), Some(surface)) = (r.camera_from_torso, tracker.surface()) {
             let truth = TruthFrame {
                 surface: &true_surface,
                 camera_from_torso: isometry_of(&t.camera_from_torso),
@@ -247,7 +283,10 @@ pub fn run_variant(
         *e = json!(e.as_u64().unwrap_or(0) + 1);
     }
     let mut ms: Vec<f32> = after_init.iter().map(|s| s.ms).collect();
-    let recovery = recovery_frames(seq, &scores);
+    let recovery = full
+        .as_ref()
+        .and_then(|f| f.episodes().full_occlusion.as_ref().map(|o| o.end))
+        .map(|end| recovery_frames(end, &scores));
     let c = tracker.counters();
     let summary = json!({
         "frames": scores.len(),
@@ -267,17 +306,15 @@ pub fn run_variant(
     Ok((scores, summary))
 }
 
-/// Frames from the end of the full-occlusion episode (`sequence.json`'s `full_occlusion` frame range, when the
-/// sequence has one) to the first frame tracked again with a torso error under 20 mm; `None` without an episode.
-fn recovery_frames(seq: &SequenceData, scores: &[FrameScore]) -> Option<u32> {
-    let raw = std::fs::read(seq.dir.join("sequence.json")).ok()?;
-    let v: Value = serde_json::from_slice(&raw).ok()?;
-    let end = v.get("full_occlusion")?.get("end_frame")?.as_u64()? as usize;
+/// Frames from the end of the full-occlusion episode (the first unparked frame) to the first frame tracked again
+/// (a state with a pose and a torso surface error under 20 mm); the frames left when it never recovers.
+fn recovery_frames(end: u32, scores: &[FrameScore]) -> u32 {
     scores
         .iter()
-        .skip(end)
+        .skip(end as usize)
         .position(|s| s.torso_mm.is_some_and(|e| e < 20.0))
         .map(|p| p as u32)
+        .unwrap_or(scores.len().saturating_sub(end as usize) as u32)
 }
 
 fn variants(names: &[String]) -> Result<Vec<Variant>> {
