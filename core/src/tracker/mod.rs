@@ -293,6 +293,7 @@ pub struct Tracker<'m, 's> {
     init: Init,
     torso: Option<TorsoModel>,
     pose: Option<Isometry3>,
+    last_good_pose: Option<Isometry3>,
     frames: u32,
     seq: u16,
     shape_revision: u8,
@@ -387,6 +388,7 @@ impl<'m, 's> Tracker<'m, 's> {
             init: Init::new(),
             torso: None,
             pose: None,
+            last_good_pose: None,
             frames: 0,
             seq: 0,
             shape_revision: 0,
@@ -444,6 +446,7 @@ impl<'m, 's> Tracker<'m, 's> {
         self.init = Init::new();
         self.torso = None;
         self.pose = None;
+        self.last_good_pose = None;
     }
 
     /// The source reported a fault; the next usable frame re-acquires.
@@ -769,9 +772,16 @@ impl<'m, 's> Tracker<'m, 's> {
         } else {
             // Starts, best first: the last refined pose (feedback), the forest's pose, and when acquiring without
             // a pose, the forest's pose turned about the body's long axis (its roll is the least certain part).
-            let mut starts: heapless::Vec<Isometry3, 4> = heapless::Vec::new();
+            let mut starts: heapless::Vec<Isometry3, 5> = heapless::Vec::new();
             if variant == Variant::ForestIcpFeedback
                 && let Some(p) = prior_pose
+            {
+                let _ = starts.push(p);
+            }
+            // Re-acquiring: the patient is most likely near where the track was lost.
+            if prior_pose.is_none()
+                && variant == Variant::ForestIcpFeedback
+                && let Some(p) = self.last_good_pose
             {
                 let _ = starts.push(p);
             }
@@ -798,7 +808,7 @@ impl<'m, 's> Tracker<'m, 's> {
                     clock,
                     watch,
                 );
-                let q = fit.quality(&self.cfg.icp);
+                let q = fit.quality(&self.cfg.icp, prior_pose.is_none());
                 let better = match &best {
                     None => true,
                     Some((_, bf, bq)) => {
@@ -826,7 +836,10 @@ impl<'m, 's> Tracker<'m, 's> {
                 Some((pose, fit, q)) => {
                     report.fit = fit;
                     match q {
-                        FitQuality::Good => self.pose = Some(pose),
+                        FitQuality::Good => {
+                            self.pose = Some(pose);
+                            self.last_good_pose = Some(pose);
+                        }
                         // Coasting: the pose stays where the last good fit left it.
                         FitQuality::Occluded | FitQuality::Failed => {
                             if prior_pose.is_none() {

@@ -23,10 +23,16 @@ pub struct TorsoIcpConfig {
     pub stop_m: f32,
     /// A good fit has at least this many pairs.
     pub min_pairs: u16,
-    /// A good fit's RMS point-to-plane residual is at most this, metres.
+    /// A good fit's RMS point-to-plane residual is at most this while tracking, metres (the estimated shape never
+    /// matches the patient exactly: a right fit leaves some residual).
     pub max_rms_m: f32,
+    /// The stricter limit when acquiring without a pose, metres: a wrong local minimum (turned or shifted torso) leaves
+    /// about 1 cm.
+    pub acquire_max_rms_m: f32,
     /// Below this share of the front-facing torso points visible (the rest occluded), the torso is occluded.
     pub min_visible: f32,
+    /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
+    pub occluded_below: f32,
     /// An occluder is an observed point this much nearer to the camera than the model surface, metres.
     pub occluder_margin_m: f32,
     /// Largest model-to-observed distance of a pair, metres.
@@ -40,8 +46,10 @@ impl Default for TorsoIcpConfig {
             huber_m: 0.01,
             stop_m: 1e-4,
             min_pairs: 150,
-            max_rms_m: 0.008,
+            max_rms_m: 0.012,
+            acquire_max_rms_m: 0.008,
             min_visible: 0.3,
+            occluded_below: 0.7,
             occluder_margin_m: 0.04,
             max_distance_m: 0.1,
         }
@@ -62,13 +70,15 @@ pub struct TorsoFit {
 }
 
 impl TorsoFit {
-    /// The verdict for the state machine.
-    pub fn quality(&self, cfg: &TorsoIcpConfig) -> FitQuality {
+    /// The verdict for the state machine (`acquiring`: no pose yet, the stricter residual limit applies).
+    pub fn quality(&self, cfg: &TorsoIcpConfig, acquiring: bool) -> FitQuality {
         let a = &self.association;
-        if a.pairs >= cfg.min_pairs as usize && a.rms_m() <= cfg.max_rms_m && self.visible >= cfg.min_visible
-        {
+        let max_rms = if acquiring { cfg.acquire_max_rms_m } else { cfg.max_rms_m };
+        if a.pairs >= cfg.min_pairs as usize && a.rms_m() <= max_rms && self.visible >= cfg.min_visible {
             FitQuality::Good
-        } else if self.visible < cfg.min_visible && a.pairs + a.occluded >= cfg.min_pairs as usize {
+        } else if self.visible < cfg.occluded_below && a.pairs + a.occluded >= cfg.min_pairs as usize {
+            // Too little seen, or a fit spoiled while a good part of the torso is hidden (the arm coming or going):
+            // occlusion, not a lost patient.
             FitQuality::Occluded
         } else {
             FitQuality::Failed
