@@ -56,7 +56,7 @@ fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
 }
 
 /// The first model directory holding all three default models.
-fn find_models() -> Result<PathBuf, Failure> {
+pub fn find_models() -> Result<PathBuf, Failure> {
     let dirs = crate::model_dirs::model_dirs();
     dirs.iter()
         .find(|d| MODEL_FILES.iter().all(|f| d.join(f).is_file()))
@@ -131,6 +131,8 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         limit: args.frames.unwrap_or(u32::MAX),
         truth: truth.as_ref(),
         tracker: pipeline::tracker_config(robot_base_from_camera),
+        realtime: false,
+        skip_corrupt: false,
     };
     let started = Instant::now();
     let link: Option<&mut dyn Link> = match sink.as_mut() {

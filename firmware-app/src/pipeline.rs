@@ -62,6 +62,8 @@ pub struct RunStats {
     pub send_errors: u64,
     /// Budget overruns the tracker counted.
     pub budget_overruns: u32,
+    /// Frames the source could not decode (skipped, as the service does).
+    pub corrupt: u64,
 }
 
 /// Mean of a list, NaN when empty.
@@ -123,6 +125,7 @@ impl RunStats {
             "latency_ms_p50": num(percentile(&self.latency_us, 50.0) / 1000.0),
             "latency_ms_p99": num(percentile(&self.latency_us, 99.0) / 1000.0),
             "budget_overruns": self.budget_overruns,
+            "corrupt_frames": self.corrupt,
             "packets": self.packets,
             "send_errors": self.send_errors,
         })
@@ -137,10 +140,13 @@ pub struct PlayOptions<'a> {
     pub truth: Option<&'a Truth>,
     /// The tracker settings.
     pub tracker: TrackerConfig,
+    /// Play at the recorded rate (capture timestamps) instead of as fast as possible.
+    pub realtime: bool,
+    /// Skip frames the source cannot decode (replay of a damaged file) instead of failing the run (the demo).
+    pub skip_corrupt: bool,
 }
 
 /// What [`play`] hands each frame's observer.
-#[allow(dead_code)] // `frame` and `surface` feed the MCAP recorder and the live view (issue 15), merged next
 pub struct FrameView<'a, 'r> {
     /// The frame.
     pub frame: &'a DepthFrame<'a>,
@@ -205,12 +211,39 @@ pub fn play(
     let clock = MonotonicClock;
     let mut stats = RunStats::default();
     let mut buf = [0u8; supine_core::wire::serial::MAX_WIRE_LEN];
+    let started = std::time::Instant::now();
+    let mut first_capture = None;
     while stats.frames < opts.limit {
         let frame = match src.next_frame(Duration::from_millis(500)) {
             Ok(f) => f,
             Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e)
+                if opts.skip_corrupt
+                    && matches!(
+                        e.kind(),
+                        SourceErrorKind::CorruptData | SourceErrorKind::Unsupported
+                    ) =>
+            {
+                stats.corrupt += 1;
+                tracing::warn!("skipping a frame: {e}");
+                // A damaged file that repeats its error without moving on: bound it.
+                if stats.corrupt > 1000 && stats.frames == 0 {
+                    return Err(PlayError::Source(format!(
+                        "{}: no readable frame in the first 1000",
+                        src.describe()
+                    )));
+                }
+                continue;
+            }
             Err(e) => return Err(PlayError::Source(format!("reading {}: {e}", src.describe()))),
         };
+        if opts.realtime {
+            let first = *first_capture.get_or_insert(frame.capture);
+            let due = Duration::from_micros(frame.capture.since(first).max(0) as u64);
+            if let Some(wait) = due.checked_sub(started.elapsed()) {
+                std::thread::sleep(wait);
+            }
+        }
         let i = stats.frames as usize;
         let arm = opts.truth.and_then(|t| arm_from_truth(t, i, &frame));
         let report = tracker.process(&frame, arm.as_ref(), &clock);

@@ -1,10 +1,11 @@
 //! `supine replay FILE`: a recording (.oni, or a ROS 2 MCAP depth bag) through the service's per-frame path, as
 //! fast as possible or `--realtime`, with `--record OUT.mcap` (Foxglove channels) and `--view PORT` (live Foxglove).
 //!
-//! Today the per-frame path is the depth frame alone: the tracker (the tracker issue) goes in [`process`], the one
-//! place where a frame becomes a [`FrameRecord`]; `--truth`, `--arm` and `--sink` land with it. Corrupt frames are
-//! counted and skipped, as the service does. Cost per frame: the source's decode plus, when recording or viewing,
-//! the Foxglove encoding (see [`crate::foxglove`]).
+//! Each frame goes through the tracker (`crate::pipeline::play`, the same loop as `supine demo`); [`record_of`] turns
+//! its report into the [`FrameRecord`] the Foxglove outputs write. With `--truth FILE` (a sequence's truth.jsonl,
+//! sequence.json beside it) the tracker gets the calibration and arm states from the truth's probe pose, and the
+//! summary reports accuracy. `--sink` sends the packets. Corrupt frames are counted and skipped, as the service
+//! does. Cost per frame: the source's decode, the tracker, and when recording or viewing the Foxglove encoding.
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -12,17 +13,21 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use supine_core::camera::Intrinsics;
-use supine_core::depth::DepthFrame;
 use supine_drivers::oni::OniReader;
 use supine_drivers::ros_bag::{self, McapSource};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
 
 use crate::failure::Failure;
-use crate::foxglove::FrameRecord;
 use crate::foxglove::live::{self, LiveView};
 use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
+use crate::foxglove::{FrameRecord, ProbeOverlay, TorsoOverlay};
 use crate::output::{self, Output};
+use crate::pipeline::{self, FrameView, PlayOptions};
+use crate::truth::Truth;
 use crate::{note, numbers};
+use supine_core::geometry::Isometry3;
+use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
+use supine_drivers::tracker_host::ModelFiles;
 
 /// Arguments of `supine replay`.
 #[derive(Args, Debug)]
@@ -50,12 +55,37 @@ pub struct ReplayArgs {
     /// Also write the summary as JSON to this file.
     #[arg(long, value_name = "FILE")]
     pub json: Option<PathBuf>,
+    /// Ground truth (a sequence's truth.jsonl, with sequence.json beside it): calibration, arm states from the true
+    /// probe pose, and accuracy in the summary.
+    #[arg(long, value_name = "FILE")]
+    pub truth: Option<PathBuf>,
+    /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`.
+    #[arg(long)]
+    pub sink: Option<String>,
 }
 
-/// One frame through the per-frame path. The tracker goes here: it turns the depth frame into salient points,
-/// the shaped torso, the probe mapping and the packets of a [`FrameRecord`]; today only the depth is passed on.
-fn process<'a>(frame: DepthFrame<'a>, intrinsics: Intrinsics) -> FrameRecord<'a> {
-    FrameRecord::depth_only(frame, intrinsics)
+/// What the Foxglove outputs write for one tracked frame.
+fn record_of<'a>(v: &'a FrameView<'a, 'a>, intrinsics: Intrinsics) -> FrameRecord<'a> {
+    let r = v.report;
+    let pose = r.camera_from_torso;
+    FrameRecord {
+        capture: v.frame.capture,
+        depth: *v.frame,
+        intrinsics,
+        salient: r.salient_camera.as_ref(),
+        torso: pose
+            .zip(v.surface)
+            .map(|(camera_from_torso, surface)| TorsoOverlay {
+                surface,
+                camera_from_torso,
+            }),
+        probe: pose.zip(r.probe).map(|(p, m)| ProbeOverlay {
+            tip: p * m.tip,
+            surface_point: Some(p * m.nearest),
+        }),
+        packets: &r.packets,
+        state: Some(r.state),
+    }
 }
 
 /// Open the recording by its extension; returns the source and its frame count when the file says.
@@ -96,12 +126,6 @@ fn progress(total: Option<u64>) -> ProgressBar {
     bar
 }
 
-fn percentile_ms(sorted: &[Duration], p: f64) -> Option<f64> {
-    let last = sorted.len().checked_sub(1)?;
-    let rank = ((p / 100.0) * last as f64).round() as usize;
-    Some(sorted[rank.min(last)].as_secs_f64() * 1e3)
-}
-
 /// Run `supine replay`.
 pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     let inputs = [("FILE", args.file.as_path())];
@@ -121,6 +145,10 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         }
         None => None,
     };
+    let truth = match &args.truth {
+        Some(p) => Some(Truth::load(p).map_err(|e| anyhow::anyhow!("--truth: {e:#}"))?),
+        None => None,
+    };
     let (mut src, total) = open(&args)?;
     let intrinsics = src.intrinsics();
     note!("supine replay: {}", src.describe());
@@ -137,7 +165,8 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     };
     let record_file = record_out.as_mut().map(Output::take_file);
     // Replay records every frame (the loop waits for the writer); the service drops frames instead.
-    let mut outputs = FoxgloveOutputs::new(record_file, live, None, Pace::Lossless)
+    let rb_known = truth.as_ref().map(|t| t.robot_base_from_camera);
+    let mut outputs = FoxgloveOutputs::new(record_file, live, rb_known, Pace::Lossless)
         .map_err(|e| anyhow::anyhow!("--record: {e}"))?;
     if let (Some(v), Some(secs)) = (outputs.live(), args.view_wait)
         && !v.wait_for_subscriber(Duration::from_secs(secs as u64))
@@ -145,52 +174,44 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         note!("supine replay: no viewer subscribed within {secs} s; playing anyway");
     }
 
-    let limit = args.frames.map_or(u64::MAX, u64::from);
-    let bar = progress(total.map(|t| t.min(limit)));
-    let mut latencies = Vec::new();
-    let mut corrupt = 0u64;
-    let started = Instant::now();
-    let mut first_capture = None;
-    while (latencies.len() as u64) < limit {
-        let t0 = Instant::now();
-        let frame = match src.next_frame(Duration::from_millis(500)) {
-            Ok(f) => f,
-            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
-            Err(e)
-                if matches!(
-                    e.kind(),
-                    SourceErrorKind::CorruptData | SourceErrorKind::Unsupported
-                ) =>
-            {
-                corrupt += 1;
-                bar.suspend(|| tracing::warn!("skipping a frame: {e}"));
-                // A damaged file repeats its error forever only if the reader cannot move on; bound that.
-                if corrupt > 1000 && latencies.is_empty() {
-                    return Err(anyhow::anyhow!(
-                        "{}: no readable frame in the first 1000",
-                        args.file.display()
-                    )
-                    .into());
-                }
-                continue;
-            }
-            Err(e) => return Err(anyhow::anyhow!("reading {}: {e}", args.file.display()).into()),
-        };
-        if args.realtime {
-            let first = *first_capture.get_or_insert(frame.capture);
-            let due = Duration::from_micros(frame.capture.since(first).max(0) as u64);
-            if let Some(wait) = due.checked_sub(started.elapsed()) {
-                std::thread::sleep(wait);
-            }
+    let mut sink = match &args.sink {
+        None => None,
+        Some(s) => {
+            let spec = s
+                .parse::<LinkSpec>()
+                .map_err(|e| Failure::usage(format!("--sink: {e}")))?;
+            Some(link::open(&spec, &LinkOptions::default()).map_err(|e| anyhow::anyhow!("--sink: {e}"))?)
         }
-        let t0 = if args.realtime { Instant::now() } else { t0 };
-        let record = process(frame, intrinsics);
-        outputs.frame(&record);
-        latencies.push(t0.elapsed());
+    };
+    let model_dir = crate::demo::find_models()?;
+    let files = ModelFiles::load(&model_dir).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let rb = truth
+        .as_ref()
+        .map(|t| t.robot_base_from_camera)
+        .unwrap_or_else(Isometry3::identity);
+    let opts = PlayOptions {
+        limit: args.frames.unwrap_or(u32::MAX),
+        truth: truth.as_ref(),
+        tracker: pipeline::tracker_config(rb),
+        realtime: args.realtime,
+        skip_corrupt: true,
+    };
+    let bar = progress(total.map(|t| t.min(opts.limit as u64)));
+    let started = Instant::now();
+    let link: Option<&mut dyn Link> = match sink.as_mut() {
+        Some(l) => Some(l.as_mut()),
+        None => None,
+    };
+    let stats = pipeline::play(src.as_mut(), &files, &opts, link, |v, _| {
+        outputs.frame(&record_of(v, intrinsics));
         bar.inc(1);
+    })
+    .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if let Some(l) = sink.as_mut() {
+        let _ = l.close(Duration::from_secs(2));
     }
-    bar.finish_and_clear();
-    let frames = latencies.len();
+    let frames = stats.frames as usize;
+    let corrupt = stats.corrupt;
     let report = match outputs.finish() {
         Ok(r) => r,
         Err(e) => {
@@ -204,18 +225,15 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     if let Some(out) = record_out {
         out.commit()?;
     }
-    latencies.sort();
-    let (p50, p99) = (percentile_ms(&latencies, 50.0), percentile_ms(&latencies, 99.0));
+    let p50 = pipeline::percentile(&stats.latency_us, 50.0) / 1000.0;
+    let p99 = pipeline::percentile(&stats.latency_us, 99.0) / 1000.0;
     let wall = started.elapsed().as_secs_f64();
     let mut table = String::new();
     let mut row = |name: &str, value: String| table.push_str(&format!("  {name:<28} {value}\n"));
     row("recording", args.file.display().to_string());
     row("frames", format!("{frames} ({corrupt} corrupt, skipped)"));
     row("throughput (frames/s)", format!("{:.1}", frames as f64 / wall));
-    row(
-        "latency p50 / p99 (ms)",
-        format!("{:.3} / {:.3}", p50.unwrap_or(f64::NAN), p99.unwrap_or(f64::NAN)),
-    );
+    row("latency p50 / p99 (ms)", format!("{p50:.3} / {p99:.3}"));
     if let Some(p) = &args.record {
         row(
             "recorded",
@@ -231,21 +249,31 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
             ),
         );
     }
-    row("tracker", "not wired into replay yet: depth only".to_owned());
+    row("states (frames)", stats.states_line());
+    row(
+        "tracked after init",
+        format!("{:.1} %", stats.tracked_fraction() * 100.0),
+    );
+    if truth.is_some() {
+        for (name, v) in [
+            ("torso surface error (mm)", &stats.torso_mm),
+            ("salient-point error (mm)", &stats.point_mm),
+            ("probe mapping error (mm)", &stats.probe_mm),
+            ("probe distance error (mm)", &stats.probe_distance_mm),
+        ] {
+            row(name, format!("{:.1} over {} frames", pipeline::mean(v), v.len()));
+        }
+    }
+    row("budget overruns", stats.budget_overruns.to_string());
     crate::console::out(&format!("supine replay summary\n{table}"))?;
     if let Some(out) = json_out {
-        let report = serde_json::json!({
-            "frames": frames,
-            "corrupt_frames": corrupt,
-            "latency_ms_p50": p50,
-            "latency_ms_p99": p99,
-            "tracked_fraction": serde_json::Value::Null,
-            "recorded_frames": args.record.as_ref().map(|_| report.recorded),
-            "live_view": report.live.map(|s| serde_json::json!({
-                "connections": s.connections, "queued": s.queued, "dropped": s.dropped
-            })),
-            "recording": args.file.display().to_string(),
-        });
+        let mut j = stats.json();
+        j["recorded_frames"] = serde_json::json!(args.record.as_ref().map(|_| report.recorded));
+        j["live_view"] = serde_json::json!(report.live.map(|s| serde_json::json!({
+            "connections": s.connections, "queued": s.queued, "dropped": s.dropped
+        })));
+        j["recording"] = args.file.display().to_string().into();
+        let report = j;
         let text = serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?;
         output::write_all(out, text.as_bytes())?;
     }

@@ -322,6 +322,20 @@ fn quat_q14(q: &UnitQuaternion) -> UnitQuatQ14 {
     UnitQuatQ14::from_f32([q.w, q.i, q.j, q.k]).unwrap_or(UnitQuatQ14::IDENTITY)
 }
 
+/// Highest hip centre above the mattress a lying patient has, metres (the pelvis is 10-20 cm thick).
+const MAX_HIP_HEIGHT_M: f32 = 0.3;
+/// Least cosine between the chest's outward axis and the mattress normal (lying, rolled or on a raised head
+/// section up to about 60°).
+const MIN_CHEST_UP_COS: f32 = 0.5;
+
+/// Whether a torso pose is one of a patient lying on the bed.
+fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
+    let hip = Point3::from(camera_from_torso.translation.vector);
+    let h = bed.mattress.signed_distance(&hip);
+    let chest = camera_from_torso.rotation * Vector3::z();
+    (-0.05..=MAX_HIP_HEIGHT_M).contains(&h) && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
+}
+
 /// Roll offsets tried when acquiring without a pose, radians.
 const ACQUIRE_ROLLS_RAD: [f32; 2] = [-0.35, 0.35];
 
@@ -808,7 +822,11 @@ impl<'m, 's> Tracker<'m, 's> {
                     clock,
                     watch,
                 );
-                let q = fit.quality(&self.cfg.icp, prior_pose.is_none());
+                let mut q = fit.quality(&self.cfg.icp, prior_pose.is_none());
+                if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
+                    // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
+                    q = FitQuality::Failed;
+                }
                 let better = match &best {
                     None => true,
                     Some((_, bf, bq)) => {

@@ -73,7 +73,11 @@ impl TorsoFit {
     /// The verdict for the state machine (`acquiring`: no pose yet, the stricter residual limit applies).
     pub fn quality(&self, cfg: &TorsoIcpConfig, acquiring: bool) -> FitQuality {
         let a = &self.association;
-        let max_rms = if acquiring { cfg.acquire_max_rms_m } else { cfg.max_rms_m };
+        let max_rms = if acquiring {
+            cfg.acquire_max_rms_m
+        } else {
+            cfg.max_rms_m
+        };
         if a.pairs >= cfg.min_pairs as usize && a.rms_m() <= max_rms && self.visible >= cfg.min_visible {
             FitQuality::Good
         } else if self.visible < cfg.occluded_below && a.pairs + a.occluded >= cfg.min_pairs as usize {

@@ -48,7 +48,8 @@ pub struct FrameRecord<'a> {
 }
 
 impl<'a> FrameRecord<'a> {
-    /// A record with the depth frame only.
+    /// A record with the depth frame only (tests build overlays on it).
+    #[cfg(test)]
     pub fn depth_only(depth: DepthFrame<'a>, intrinsics: Intrinsics) -> Self {
         FrameRecord {
             capture: depth.capture,

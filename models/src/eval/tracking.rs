@@ -237,8 +237,13 @@ pub fn run_variant(
             occluded: t.torso_occluded_fraction,
             ..FrameScore::default()
         };
-        if let (Some(pose), Some(surface), Some(tt)) = (r.camera_from_torso, tracker.surface(), full.as_ref()) {
-            let estimated: Vec<[f32; 3]> = surface.vertices().iter().map(|v| (pose * v).coords.into()).collect();
+        if let (Some(pose), Some(surface), Some(tt)) = (r.camera_from_torso, tracker.surface(), full.as_ref())
+        {
+            let estimated: Vec<[f32; 3]> = surface
+                .vertices()
+                .iter()
+                .map(|v| (pose * v).coords.into())
+                .collect();
             s.torso_mm = Some(tt.torso_surface_error_mm(&estimated, i as u32)?);
             if let Some(p) = r.salient_camera {
                 s.point_mm = Some(tt.point_error_mm(&p.map(|q| q.coords.into()), i as u32)?.mean_mm);
