@@ -30,7 +30,8 @@
 //! - `icp`: projective point-to-plane ICP with fixed iterations; `fit`: alternating rigid ICP and shape fitting
 //!   (Eq. 7).
 //! - [`probe`]: probe mapping onto the torso surface (tip, nearest point, normal, signed distance, region).
-//! - `tracker/`: state machine, frame budget, workspace sized at build, `process(frame, arm, clock)`.
+//! - [`tracker`]: the real-time loop: state machine, frame budget, caller-sized scratch, `process(frame, arm, clock)`,
+//!   and the accuracy figures it is scored by.
 //!
 //! Their trainers, quantisers and evaluations live in `supine-models` (`models/src/forest`, `models/src/shape`,
 //! `models/src/eval`).
