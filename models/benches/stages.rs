@@ -16,7 +16,7 @@ use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estima
 use supine_core::forest::model::{ForestModel, ForestView};
 use supine_core::forest::sample::{SamplePixel, sample_pixels};
 use supine_core::forest::{MAX_SAMPLES, MAX_TREES, meanshift::Vote};
-use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, isometry_from_rows};
 use supine_core::icp::{IcpParams, point_to_plane_step};
 use supine_core::planes::{PlaneConfig, estimate_bed, scratch_points};
 use supine_core::probe::map_tip;
@@ -35,14 +35,6 @@ use supine_tests::fixtures::{demo_dir, demo_frames};
 
 /// The demo frame the stages run on (the arm is over the torso there).
 const FRAME: usize = 30;
-
-fn iso_from_rows(m: &[[f32; 4]; 4]) -> Isometry3 {
-    let r = nalgebra::Matrix3::from_fn(|i, j| m[i][j]);
-    Isometry3::from_parts(
-        Translation3::new(m[0][3], m[1][3], m[2][3]),
-        UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(r)),
-    )
-}
 
 fn bench(c: &mut Criterion) {
     let k = Intrinsics::KINECT_V1;
@@ -184,7 +176,7 @@ fn bench(c: &mut Criterion) {
     .expect("torso surface");
     let mp: Vec<[f32; 3]> = surface.vertices().iter().map(|p| p.coords.into()).collect();
     let mn: Vec<[f32; 3]> = surface.normals().iter().map(|v| (*v).into()).collect();
-    let camera_from_torso = iso_from_rows(&truth.camera_from_torso);
+    let camera_from_torso = isometry_from_rows(&truth.camera_from_torso);
     let start = Isometry3::from_parts(
         Translation3::new(0.02, -0.015, 0.015),
         UnitQuaternion::from_scaled_axis(Vector3::new(0.03, -0.03, 0.02)),
@@ -197,7 +189,7 @@ fn bench(c: &mut Criterion) {
     // Probe mapping: the arm's tip (truth of the frame) onto the torso surface.
     let tip = truth
         .camera_from_probe
-        .map(|m| iso_from_rows(&m).translation.vector)
+        .map(|m| isometry_from_rows(&m).translation.vector)
         .expect("the demo frame has the arm");
     let tip_torso = camera_from_torso.inverse_transform_point(&Point3::from(tip));
     g.bench_function("probe_mapping", |b| {
