@@ -98,9 +98,23 @@ fn sigterm_ends_a_looping_service_cleanly() {
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();
-    // Let it initialise and loop the 60-frame recording at least once (the file link writes a temporary file and
-    // renames it at the end, so time is the only gauge here: 60 frames take well under a second).
-    std::thread::sleep(Duration::from_secs(8));
+    // Let it initialise and loop the 60-frame recording at least once. The file link writes a temporary file
+    // beside packets.bin and renames it at the end: watch that one grow past 70 frames' packets (under qemu a frame
+    // takes much longer than on the host, so time alone is no gauge).
+    let deadline = std::time::Instant::now() + LIMIT;
+    while std::time::Instant::now() < deadline {
+        std::thread::sleep(Duration::from_millis(200));
+        let written: u64 = std::fs::read_dir(&dir)
+            .unwrap()
+            .filter_map(|e| e.ok())
+            .filter(|e| e.file_name().to_string_lossy().contains("packets.bin"))
+            .filter_map(|e| e.metadata().ok().map(|m| m.len()))
+            .max()
+            .unwrap_or(0);
+        if written > 6_500 {
+            break;
+        }
+    }
     terminate(&child);
     let out = wait_within(child, LIMIT);
     assert!(out.status.success(), "{}", stderr(&out));
