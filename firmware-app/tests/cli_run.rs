@@ -14,12 +14,14 @@ use supine_core::wire::{Body, Message, TrackerState};
 
 const LIMIT: Duration = Duration::from_secs(120);
 
+/// A service config on the demo recording. The frame budget is 1 s: under qemu (cross/test) a 30 ms budget cuts ICP
+/// so hard that acquisition depends on the emulator's speed, and these tests check the life cycle, not the budget.
 fn config(dir: &Path, looped: bool) -> std::path::PathBuf {
     let models = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/artifacts");
     let text = format!(
         "source = \"file:{models}/demo/sequence.oni\"\nloop_source = {looped}\nlink = \"file:{}\"\n\
          [models]\ndir = \"{models}\"\nbody = \"body.sbm\"\njoints = \"joints.jfor\"\nshape = \"shape.ssm\"\n\
-         [budget]\nframe_ms = 30.0\nicp_iterations = 10\n[init]\nshape_frames = 10\ntimeout_s = 60.0\n\
+         [budget]\nframe_ms = 1000.0\nicp_iterations = 10\n[init]\nshape_frames = 10\ntimeout_s = 60.0\n\
          [log]\nfilter = \"warn\"\n",
         dir.join("packets.bin").display()
     );
