@@ -8,7 +8,6 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use clap::Args;
-use supine_core::geometry::Isometry3;
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use supine_drivers::source::{self, DepthSource, SourceSpec};
 use supine_drivers::tracker_host::{MODEL_FILES, ModelFiles};
@@ -123,17 +122,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         note!("supine demo: no truth.jsonl beside the recording; accuracy is not measured");
         None
     };
-    let robot_base_from_camera = truth
-        .as_ref()
-        .map(|t| t.robot_base_from_camera)
-        .unwrap_or_else(Isometry3::identity);
-    let opts = PlayOptions {
-        limit: args.frames.unwrap_or(u32::MAX),
-        truth: truth.as_ref(),
-        tracker: pipeline::tracker_config(robot_base_from_camera),
-        realtime: false,
-        skip_corrupt: false,
-    };
+    let opts = PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref());
     let started = Instant::now();
     let link: Option<&mut dyn Link> = match sink.as_mut() {
         Some(l) => Some(l.as_mut()),

@@ -146,6 +146,23 @@ pub struct PlayOptions<'a> {
     pub skip_corrupt: bool,
 }
 
+impl<'a> PlayOptions<'a> {
+    /// Play up to `limit` frames as fast as possible, failing on a corrupt frame; the tracker is calibrated by the
+    /// truth's extrinsic when there is one (identity otherwise).
+    pub fn new(limit: u32, truth: Option<&'a Truth>) -> Self {
+        let rb = truth
+            .map(|t| t.robot_base_from_camera)
+            .unwrap_or_else(Isometry3::identity);
+        PlayOptions {
+            limit,
+            truth,
+            tracker: tracker_config(rb),
+            realtime: false,
+            skip_corrupt: false,
+        }
+    }
+}
+
 /// What [`play`] hands each frame's observer.
 pub struct FrameView<'a, 'r> {
     /// The frame.

@@ -25,7 +25,6 @@ use crate::output::{self, Output};
 use crate::pipeline::{self, FrameView, PlayOptions};
 use crate::truth::Truth;
 use crate::{note, numbers};
-use supine_core::geometry::Isometry3;
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use supine_drivers::tracker_host::ModelFiles;
 
@@ -185,16 +184,10 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     };
     let model_dir = crate::demo::find_models()?;
     let files = ModelFiles::load(&model_dir).map_err(|e| anyhow::anyhow!("{e}"))?;
-    let rb = truth
-        .as_ref()
-        .map(|t| t.robot_base_from_camera)
-        .unwrap_or_else(Isometry3::identity);
     let opts = PlayOptions {
-        limit: args.frames.unwrap_or(u32::MAX),
-        truth: truth.as_ref(),
-        tracker: pipeline::tracker_config(rb),
         realtime: args.realtime,
         skip_corrupt: true,
+        ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
     };
     let bar = progress(total.map(|t| t.min(opts.limit as u64)));
     let started = Instant::now();
