@@ -104,25 +104,7 @@ impl SequenceData {
     }
 }
 
-/// The sequence directories under `data` (itself when it holds a sequence.json).
-pub fn sequence_dirs(data: &Path) -> Result<Vec<PathBuf>> {
-    if data.join("sequence.json").is_file() {
-        return Ok(vec![data.to_path_buf()]);
-    }
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(data)
-        .with_context(|| format!("reading {}", data.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join("sequence.json").is_file())
-        .collect();
-    dirs.sort();
-    if dirs.is_empty() {
-        bail!(
-            "{} holds no sequence (no sequence.json in it or its subdirectories)",
-            data.display()
-        );
-    }
-    Ok(dirs)
-}
+pub use super::tracking_truth::sequence_dirs;
 
 /// Per-frame scores of one variant.
 #[derive(Debug, Clone, Default, serde::Serialize)]
