@@ -28,6 +28,9 @@ pub struct IcpParams {
     pub above_mattress_m: f32,
     /// Pixel distance of the neighbours that give an observed normal.
     pub normal_step_px: u16,
+    /// An observed point farther from the camera than its model point by more than this is not its partner (the
+    /// camera sees past the model's edge onto the arms or the bed), metres; infinite keeps such pairs.
+    pub behind_margin_m: f32,
 }
 
 impl IcpParams {
@@ -39,6 +42,7 @@ impl IcpParams {
             mattress,
             above_mattress_m: 0.015,
             normal_step_px: 2,
+            behind_margin_m: f32::INFINITY,
         }
     }
 }
@@ -52,7 +56,17 @@ pub struct Association {
     pub occluded: usize,
     /// Sum of squared point-to-plane residuals of the pairs (m²).
     pub sum_sq_m2: f32,
+    /// Pairs whose point-to-plane residual is under [`INLIER_M`].
+    pub inliers: usize,
+    /// Model points with the observed surface well behind them (the camera sees through the model: it floats
+    /// where there is no body), paired or not.
+    pub see_through: usize,
+    /// Model points whose pixel has no depth (a shadow, a dropout, an occluder nearer than the sensor's range).
+    pub no_depth: usize,
 }
+
+/// A pair with a point-to-plane residual under this is an inlier (metres): the shape estimate's typical mismatch.
+pub const INLIER_M: f32 = 0.015;
 
 impl Association {
     /// RMS point-to-plane residual (metres), 0 without pairs.
@@ -114,8 +128,47 @@ pub fn partner(
     if o.z < p_cam.z - params.occluder_margin_m {
         return Err(());
     }
+    partner_of(frame, k, p_cam, o, u, v, params)
+}
+
+/// Why a model point has no partner, for the counts of [`Association`].
+enum Unpaired {
+    /// Its pixel has no depth.
+    NoDepth,
+    /// The observed surface lies more than the occluder margin behind it.
+    SeeThrough,
+    /// Anything else (off the image, bed, too far, no normal).
+    Other,
+}
+
+fn unpaired(frame: &DepthFrame<'_>, k: &Intrinsics, p_cam: &Point3, params: &IcpParams) -> Unpaired {
+    let Some(uv) = k.project(p_cam) else {
+        return Unpaired::Other;
+    };
+    let (u, v) = (libm::roundf(uv.x) as i32, libm::roundf(uv.y) as i32);
+    match frame.at(u, v) {
+        None => Unpaired::Other,
+        Some(0) => Unpaired::NoDepth,
+        Some(_) => match observed(frame, k, u, v) {
+            Some(o) if o.z > p_cam.z + params.occluder_margin_m => Unpaired::SeeThrough,
+            _ => Unpaired::Other,
+        },
+    }
+}
+
+/// The rest of [`partner`] once the observed point `o` at pixel (`u`, `v`) is known not to occlude.
+fn partner_of(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    p_cam: &Point3,
+    o: Point3,
+    u: i32,
+    v: i32,
+    params: &IcpParams,
+) -> Result<Option<(Point3, Vector3)>, ()> {
     if params.mattress.signed_distance(&o) < params.above_mattress_m
         || (o - p_cam).norm() > params.max_distance_m
+        || o.z > p_cam.z + params.behind_margin_m
     {
         return Ok(None);
     }
@@ -169,9 +222,15 @@ pub fn associate<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
                 let r = n.dot(&(p - o));
                 a.pairs += 1;
                 a.sum_sq_m2 += r * r;
+                a.inliers += (r.abs() < INLIER_M) as usize;
+                a.see_through += (o.z > p.z + params.occluder_margin_m) as usize;
                 on_pair(i, &p, &o, &n);
             }
-            Ok(None) => {}
+            Ok(None) => match unpaired(frame, k, &p, params) {
+                Unpaired::NoDepth => a.no_depth += 1,
+                Unpaired::SeeThrough => a.see_through += 1,
+                Unpaired::Other => {}
+            },
             Err(()) => a.occluded += 1,
         }
     }

@@ -243,14 +243,18 @@ fn bad_frames_lead_to_defined_states() {
         tracker.state(),
         TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
     ));
-    // The patient leaves the bed: every pixel above the mattress is gone.
+    // The patient leaves the bed: every pixel above the mattress now sees the mattress behind.
     let bed = *tracker.bed().unwrap();
     let (d, t) = &frames[30];
     let mut gone = d.clone();
     for (i, z) in gone.iter_mut().enumerate() {
-        let p = k.unproject((i % 640) as f32, (i / 640) as f32, *z as f32 * 0.001);
+        let (u, v) = ((i % 640) as f32, (i / 640) as f32);
+        let p = k.unproject(u, v, *z as f32 * 0.001);
         if *z != 0 && bed.mattress.signed_distance(&p) > 0.02 {
-            *z = 0;
+            // The mattress plane along this pixel's ray: signed distance is affine in the depth.
+            let s0 = bed.mattress.signed_distance(&k.unproject(u, v, 0.0));
+            let s1 = bed.mattress.signed_distance(&k.unproject(u, v, 1.0));
+            *z = (-s0 / (s1 - s0) * 1000.0).round() as u16;
         }
     }
     let mut states = Vec::new();

@@ -11,6 +11,13 @@
 //! points feed the next frame's prior; probe mapping ([`crate::probe`]) maps the newest arm state onto the surface;
 //! the [`state`] machine decides what the health message says; packets are stamped with the frame's capture time.
 //!
+//! A fit is good when its residual is small, most pairs lie within the shape's mismatch and the camera does not
+//! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) a good fit is
+//! trusted at once only when its residual is very low, otherwise once consecutive frames agree on it; while
+//! tracking, a good fit from a start other than the temporal one that lands far from it is not trusted (the
+//! patient does not jump). Pixels without depth over the torso count as hidden, so a torso under the arm's shadow
+//! coasts as occluded instead of being lost.
+//!
 //! Three variants share the loop, for the evaluation of the paper's claim: [`Variant::Forest`] (the forest's points
 //! alone give the pose), [`Variant::ForestIcp`] (ICP from the forest each frame, no prior), and
 //! [`Variant::ForestIcpFeedback`] (the product).
@@ -35,6 +42,7 @@ use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
 use crate::forest::sample::{Clip, PixelRect};
 use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
+use crate::icp::IcpParams;
 use crate::planes::{self, BedScene, PlaneConfig};
 use crate::probe::{self, ProbeMapping};
 use crate::rng::mix_seed;
@@ -249,6 +257,8 @@ pub struct FrameReport {
     pub forest_points: [Option<PointEstimate>; P],
     /// The torso fit of this frame (default when none ran).
     pub fit: TorsoFit,
+    /// The pose the best fit of this frame reached, accepted or not (for diagnostics: why acquisition waits).
+    pub fit_pose: Option<Isometry3>,
     /// The probe mapping when an arm state was given and a pose is reported.
     pub probe: Option<ProbeMapping>,
     /// Age of the arm state used (frame capture minus arm time), µs.
@@ -294,6 +304,8 @@ pub struct Tracker<'m, 's> {
     torso: Option<TorsoModel>,
     pose: Option<Isometry3>,
     last_good_pose: Option<Isometry3>,
+    /// The acquisition candidate awaiting confirmation and how many consistent frames found it.
+    candidate: Option<(Isometry3, u8)>,
     frames: u32,
     seq: u16,
     shape_revision: u8,
@@ -334,6 +346,12 @@ fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
     let h = bed.mattress.signed_distance(&hip);
     let chest = camera_from_torso.rotation * Vector3::z();
     (-0.05..=MAX_HIP_HEIGHT_M).contains(&h) && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
+}
+
+/// Whether two torso poses are the same within the confirmation tolerances.
+fn same_pose(a: &Isometry3, b: &Isometry3, cfg: &TorsoIcpConfig) -> bool {
+    let d = a.inverse() * b;
+    d.translation.vector.norm() <= cfg.confirm_m && d.rotation.angle() <= cfg.confirm_rad
 }
 
 /// Roll offsets tried when acquiring without a pose, radians.
@@ -403,6 +421,7 @@ impl<'m, 's> Tracker<'m, 's> {
             torso: None,
             pose: None,
             last_good_pose: None,
+            candidate: None,
             frames: 0,
             seq: 0,
             shape_revision: 0,
@@ -461,6 +480,7 @@ impl<'m, 's> Tracker<'m, 's> {
         self.torso = None;
         self.pose = None;
         self.last_good_pose = None;
+        self.candidate = None;
     }
 
     /// The source reported a fault; the next usable frame re-acquires.
@@ -563,6 +583,7 @@ impl<'m, 's> Tracker<'m, 's> {
             salient_camera: None,
             forest_points: [None; P],
             fit: TorsoFit::default(),
+            fit_pose: None,
             probe: None,
             arm_age_us: None,
             rejected: false,
@@ -690,8 +711,15 @@ impl<'m, 's> Tracker<'m, 's> {
                         m += 1;
                     }
                 }
-                let params =
-                    FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed.mattress), &coeffs[..m]);
+                let params = FitParams::combined(
+                    IcpParams {
+                        // The shape fit keeps every pair, as it was chosen with (the tracker's margin is for
+                        // the rigid fit only).
+                        behind_margin_m: f32::INFINITY,
+                        ..torso_icp::icp_params(&self.cfg.icp, bed.mattress)
+                    },
+                    &coeffs[..m],
+                );
                 if let Ok(r) = fit::fit_shape(
                     &body,
                     frame,
@@ -808,30 +836,48 @@ impl<'m, 's> Tracker<'m, 's> {
                 }
             }
             let params = torso_icp::icp_params(&self.cfg.icp, t.bed.mattress);
+            // Acquisition starts may be several centimetres off: they keep the pairs behind the model, which pull
+            // a start in from afar; the temporal start drops them, so the model's edges do not slide onto the
+            // patient's arms or the bed (which turned the torso by 10-15° within a few frames).
+            let acquire_params = IcpParams {
+                behind_margin_m: f32::INFINITY,
+                ..params
+            };
+            let icp_cfg = self.cfg.icp;
+            let from_prior =
+                |i: usize| i == 0 && prior_pose.is_some() && variant == Variant::ForestIcpFeedback;
             let mut best: Option<(Isometry3, TorsoFit, FitQuality)> = None;
-            for start in &starts {
+            for (i, start) in starts.iter().enumerate() {
                 let (pose, fit) = torso_icp::fit_torso(
                     frame,
                     &self.k,
                     self.scratch.torso_vertices,
                     self.scratch.torso_normals,
                     *start,
-                    &self.cfg.icp,
-                    &params,
+                    &icp_cfg,
+                    if from_prior(i) { &params } else { &acquire_params },
                     &self.cfg.budget,
                     clock,
                     watch,
                 );
-                let mut q = fit.quality(&self.cfg.icp, prior_pose.is_none());
+                let mut q = fit.quality(&icp_cfg);
                 if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
+                    q = FitQuality::Failed;
+                }
+                if q == FitQuality::Good
+                    && !from_prior(i)
+                    && let Some(p) = prior_pose
+                    && !same_pose(&p, &pose, &icp_cfg)
+                {
+                    // While tracking, the patient cannot jump: a good fit far from the prior is another local
+                    // minimum (the forest's start on a turned torso); coast instead, and re-acquire if it persists.
                     q = FitQuality::Failed;
                 }
                 let better = match &best {
                     None => true,
                     Some((_, bf, bq)) => {
-                        rank(q) > rank(*bq)
-                            || (rank(q) == rank(*bq) && fit.association.rms_m() < bf.association.rms_m())
+                        rank(q) > rank(*bq) || (rank(q) == rank(*bq) && fit.support() > bf.support())
                     }
                 };
                 if better {
@@ -850,9 +896,16 @@ impl<'m, 's> Tracker<'m, 's> {
                 }
             }
             match best {
-                None => (FitQuality::Failed, false),
-                Some((pose, fit, q)) => {
+                None => {
+                    self.candidate = None;
+                    (FitQuality::Failed, false)
+                }
+                Some((pose, fit, mut q)) => {
                     report.fit = fit;
+                    report.fit_pose = Some(pose);
+                    if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
+                        q = self.confirm(pose, &fit, q);
+                    }
                     match q {
                         FitQuality::Good => {
                             self.pose = Some(pose);
@@ -893,6 +946,28 @@ impl<'m, 's> Tracker<'m, 's> {
             let tip = probe::tip_in_torso(&a.tip_robot_base, &self.cfg.robot_base_from_camera, &pose);
             report.probe = probe::map_tip(&surface, &tip);
             report.arm_age_us = Some(frame.capture.since(a.time));
+        }
+    }
+
+    /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once
+    /// `acquire_confirm` consecutive frames found the same pose (a wrong local minimum moves with the forest's
+    /// start from frame to frame; the right pose stays).
+    fn confirm(&mut self, pose: Isometry3, fit: &TorsoFit, q: FitQuality) -> FitQuality {
+        let cfg = self.cfg.icp;
+        if q != FitQuality::Good {
+            self.candidate = None;
+            return q;
+        }
+        let run = match self.candidate {
+            Some((c, n)) if same_pose(&c, &pose, &cfg) => n.saturating_add(1),
+            _ => 1,
+        };
+        if fit.sure(&cfg) || run >= cfg.acquire_confirm {
+            self.candidate = None;
+            FitQuality::Good
+        } else {
+            self.candidate = Some((pose, run));
+            FitQuality::Failed
         }
     }
 

@@ -6,7 +6,7 @@
 //! | any | the source reports a fault | sensor_fault |
 //! | sensor_fault | a usable frame | initialising (no init yet) or reacquiring |
 //! | initialising | bed, shape and torso model built | acquiring |
-//! | acquiring, reacquiring | a good fit | tracking |
+//! | acquiring, reacquiring | a good fit (residual under `acquire_max_rms_m`, or the same pose `acquire_confirm` frames in a row) | tracking |
 //! | acquiring, reacquiring | no good fit | unchanged (no pose sent) |
 //! | tracking | a good fit | tracking (degraded when the budget cut work) |
 //! | tracking | too little torso visible | occluded |

@@ -26,9 +26,19 @@ pub struct TorsoIcpConfig {
     /// A good fit's RMS point-to-plane residual is at most this while tracking, metres (the estimated shape never
     /// matches the patient exactly: a right fit leaves some residual).
     pub max_rms_m: f32,
-    /// The stricter limit when acquiring without a pose, metres: a wrong local minimum (turned or shifted torso) leaves
-    /// about 1 cm.
+    /// The limit under which a fit made without a pose is taken at once, metres; above it (up to `max_rms_m`) an
+    /// acquisition needs `acquire_confirm` consistent frames.
     pub acquire_max_rms_m: f32,
+    /// A good fit's support (inlier pairs over pairs plus see-through points) is at least this: a right pose has
+    /// most pairs within the shape's mismatch and almost nothing seen through it; a wrong local minimum (turned,
+    /// shifted, or lying on the arm) has neither.
+    pub min_support: f32,
+    /// Consecutive acquisition fits, each within `confirm_m`/`confirm_rad` of the last, that make a pose trusted.
+    pub acquire_confirm: u8,
+    /// Translation that still counts as the same pose (acquisition) or as no jump (tracking), metres.
+    pub confirm_m: f32,
+    /// Rotation that still counts as the same pose, radians.
+    pub confirm_rad: f32,
     /// Below this share of the front-facing torso points visible (the rest occluded), the torso is occluded.
     pub min_visible: f32,
     /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
@@ -37,6 +47,9 @@ pub struct TorsoIcpConfig {
     pub occluder_margin_m: f32,
     /// Largest model-to-observed distance of a pair, metres.
     pub max_distance_m: f32,
+    /// An observed point this much farther than the model surface is not a partner, metres (see
+    /// [`IcpParams::behind_margin_m`]).
+    pub behind_margin_m: f32,
 }
 
 impl Default for TorsoIcpConfig {
@@ -46,12 +59,17 @@ impl Default for TorsoIcpConfig {
             huber_m: 0.01,
             stop_m: 1e-4,
             min_pairs: 150,
-            max_rms_m: 0.012,
+            max_rms_m: 0.014,
             acquire_max_rms_m: 0.008,
+            min_support: 0.8,
+            acquire_confirm: 2,
+            confirm_m: 0.03,
+            confirm_rad: 0.1,
             min_visible: 0.3,
             occluded_below: 0.7,
             occluder_margin_m: 0.04,
             max_distance_m: 0.1,
+            behind_margin_m: 0.04,
         }
     }
 }
@@ -65,22 +83,35 @@ pub struct TorsoFit {
     pub cut: bool,
     /// The last association: pairs, occluded points, residual.
     pub association: Association,
-    /// Share of the front-facing model points that were seen (pairs over pairs plus occluded), 0..1.
+    /// Share of the front-facing model points that were seen (pairs over pairs plus occluded plus no-depth), 0..1.
     pub visible: f32,
 }
 
 impl TorsoFit {
-    /// The verdict for the state machine (`acquiring`: no pose yet, the stricter residual limit applies).
-    pub fn quality(&self, cfg: &TorsoIcpConfig, acquiring: bool) -> FitQuality {
+    /// Inlier pairs over pairs plus see-through points, 0..1 (0 without pairs).
+    pub fn support(&self) -> f32 {
         let a = &self.association;
-        let max_rms = if acquiring {
-            cfg.acquire_max_rms_m
-        } else {
-            cfg.max_rms_m
-        };
-        if a.pairs >= cfg.min_pairs as usize && a.rms_m() <= max_rms && self.visible >= cfg.min_visible {
+        let n = a.pairs + a.see_through;
+        if n == 0 { 0.0 } else { a.inliers as f32 / n as f32 }
+    }
+
+    /// Whether a fit made without a pose is good enough to be taken at once (no confirmation).
+    pub fn sure(&self, cfg: &TorsoIcpConfig) -> bool {
+        self.association.rms_m() <= cfg.acquire_max_rms_m
+    }
+
+    /// The verdict for the state machine.
+    pub fn quality(&self, cfg: &TorsoIcpConfig) -> FitQuality {
+        let a = &self.association;
+        if a.pairs >= cfg.min_pairs as usize
+            && a.rms_m() <= cfg.max_rms_m
+            && self.support() >= cfg.min_support
+            && self.visible >= cfg.min_visible
+        {
             FitQuality::Good
-        } else if self.visible < cfg.occluded_below && a.pairs + a.occluded >= cfg.min_pairs as usize {
+        } else if self.visible < cfg.occluded_below
+            && a.pairs + a.occluded + a.no_depth >= cfg.min_pairs as usize
+        {
             // Too little seen, or a fit spoiled while a good part of the torso is hidden (the arm coming or going):
             // occlusion, not a lost patient.
             FitQuality::Occluded
@@ -95,6 +126,7 @@ pub fn icp_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> Icp
     IcpParams {
         max_distance_m: cfg.max_distance_m,
         occluder_margin_m: cfg.occluder_margin_m,
+        behind_margin_m: cfg.behind_margin_m,
         ..IcpParams::new(mattress)
     }
 }
@@ -157,11 +189,57 @@ pub fn fit_torso(
         }
     }
     let a = &fit.association;
-    let seen = a.pairs + a.occluded;
+    // Pixels without depth over the torso are hidden too: a nearby occluder reads as no depth (shadow, range).
+    let seen = a.pairs + a.occluded + a.no_depth;
     fit.visible = if seen == 0 {
         0.0
     } else {
         a.pairs as f32 / seen as f32
     };
     (pose, fit)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn fit(pairs: usize, inliers: usize, occluded: usize, see_through: usize, no_depth: usize) -> TorsoFit {
+        let association = Association {
+            pairs,
+            occluded,
+            // 5 mm RMS.
+            sum_sq_m2: pairs as f32 * 25e-6,
+            inliers,
+            see_through,
+            no_depth,
+        };
+        let seen = pairs + occluded + no_depth;
+        TorsoFit {
+            iterations: 3,
+            cut: false,
+            association,
+            visible: pairs as f32 / seen as f32,
+        }
+    }
+
+    #[test]
+    fn a_right_fit_is_good_and_a_fit_seen_through_is_not() {
+        let cfg = TorsoIcpConfig::default();
+        assert_eq!(fit(600, 570, 100, 30, 0).quality(&cfg), FitQuality::Good);
+        // Same residual, but the camera sees the mattress through a third of the model: a wrong local minimum.
+        assert_eq!(fit(600, 570, 100, 300, 0).quality(&cfg), FitQuality::Failed);
+        // Many pairs outside the inlier band.
+        assert_eq!(fit(600, 300, 100, 0, 0).quality(&cfg), FitQuality::Failed);
+    }
+
+    #[test]
+    fn a_torso_under_pixels_without_depth_is_occluded_not_failed() {
+        let cfg = TorsoIcpConfig::default();
+        // 50 pairs seen; the arm's shadow leaves 700 model points on pixels without depth.
+        let f = fit(50, 50, 0, 0, 700);
+        assert!(f.visible < cfg.min_visible);
+        assert_eq!(f.quality(&cfg), FitQuality::Occluded);
+        // With the same few pairs and nothing hidden, the patient is simply not there.
+        assert_eq!(fit(50, 50, 0, 0, 0).quality(&cfg), FitQuality::Failed);
+    }
 }

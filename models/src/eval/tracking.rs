@@ -55,6 +55,17 @@ pub struct TrackingEvalArgs {
     /// tracking error from shape error.
     #[arg(long)]
     pub true_shape: bool,
+    /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
+    /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
+    #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
+    pub budget_ms: f32,
+}
+
+fn parse_budget_ms(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && (1.0..=60_000.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{s}` is not a budget in ms (1 to 60000)")),
+    }
 }
 
 /// A 4x4 row-major rigid transform as an isometry.
@@ -125,6 +136,18 @@ pub struct FrameScore {
     pub ms: f32,
     /// True occluded fraction of the torso.
     pub occluded: f32,
+    /// RMS point-to-plane residual of the frame's torso fit, mm (frames where a fit ran).
+    pub fit_rms_mm: Option<f32>,
+    /// Share of the front-facing torso model seen by the fit, 0..1.
+    pub fit_visible: Option<f32>,
+    /// Pairs, inlier pairs, occluded and see-through points of the fit's last association.
+    pub fit_counts: Option<[usize; 4]>,
+    /// The forest's raw points against the truth, mean mm over the points it found.
+    pub forest_point_mm: Option<f32>,
+    /// Translation error of the frame's best fit (accepted or not) against the true torso frame, mm.
+    pub fit_pose_mm: Option<f32>,
+    /// Rotation error of the frame's best fit against the true torso frame, degrees.
+    pub fit_pose_deg: Option<f32>,
 }
 
 fn mean(v: impl Iterator<Item = f32>) -> Option<f32> {
@@ -148,6 +171,7 @@ pub fn run_variant(
     variant: Variant,
     truth_torso: &OwnedTorso,
     true_shape: bool,
+    budget_ms: f32,
 ) -> Result<(Vec<FrameScore>, Value)> {
     let k = Intrinsics::KINECT_V1;
     let mut cfg = TrackerConfig {
@@ -156,6 +180,7 @@ pub fn run_variant(
         ..TrackerConfig::default()
     };
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
+    cfg.budget.frame_us = (budget_ms * 1000.0) as u32;
     if true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
         for (o, s) in z.iter_mut().zip(&seq.meta.shape) {
@@ -219,6 +244,23 @@ pub fn run_variant(
             occluded: t.torso_occluded_fraction,
             ..FrameScore::default()
         };
+        if r.fit.iterations > 0 {
+            s.fit_rms_mm = Some(r.fit.association.rms_m() * 1000.0);
+            s.fit_visible = Some(r.fit.visible);
+            let a = &r.fit.association;
+            s.fit_counts = Some([a.pairs, a.inliers, a.occluded, a.see_through]);
+        }
+        if let Some(p) = r.fit_pose {
+            let d = isometry_of(&t.camera_from_torso).inverse() * p;
+            s.fit_pose_mm = Some(d.translation.vector.norm() * 1000.0);
+            s.fit_pose_deg = Some(d.rotation.angle().to_degrees());
+        }
+        s.forest_point_mm = mean(
+            r.forest_points
+                .iter()
+                .zip(&t.salient_camera)
+                .filter_map(|(e, t)| e.map(|e| (e.position.coords - Vector3::from(*t)).norm() * 1000.0)),
+        );
         if let (Some(pose), Some(surface), Some(tt)) = (r.camera_from_torso, tracker.surface(), full.as_ref())
         {
             let estimated: Vec<[f32; 3]> = surface
@@ -381,7 +423,14 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         let mut per_seq = serde_json::Map::new();
         let mut plots = Vec::new();
         for (variant, acc) in per_variant.iter_mut() {
-            let (scores, summary) = run_variant(&models, &seq, *variant, &truth_torso, args.true_shape)?;
+            let (scores, summary) = run_variant(
+                &models,
+                &seq,
+                *variant,
+                &truth_torso,
+                args.true_shape,
+                args.budget_ms,
+            )?;
             eprintln!(
                 "{}  {:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm  p50 {:.2} ms",
                 dir.file_name().unwrap_or_default().to_string_lossy(),
@@ -394,7 +443,9 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
                 summary["probe_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 summary["latency_ms_p50"].as_f64().unwrap_or(f64::NAN),
             );
-            per_seq.insert(variant.name().to_string(), summary.clone());
+            let mut with_frames = summary.clone();
+            with_frames["per_frame"] = json!(scores);
+            per_seq.insert(variant.name().to_string(), with_frames);
             acc.push(summary);
             plots.push((*variant, scores));
         }
