@@ -9,6 +9,7 @@ mod config;
 mod console;
 mod demo;
 mod failure;
+mod faults;
 mod foxglove;
 mod info;
 mod links;
@@ -62,13 +63,16 @@ enum Command {
     Wire(wire::WireCommand),
 }
 
-fn init_tracing(verbose: u8) {
+/// Logging to stderr: `SUPINE_LOG` when set, else `-v`'s level, else `config_filter` (`supine run`'s `[log]
+/// filter`), else warnings only.
+pub fn init_tracing(verbose: u8, config_filter: Option<&str>) {
     use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
-    let default = match verbose {
-        0 => "warn",
-        1 => "info",
-        2 => "debug",
+    let default = match (verbose, config_filter) {
+        (0, Some(f)) => f,
+        (0, None) => "warn",
+        (1, _) => "info",
+        (2, _) => "debug",
         _ => "trace",
     };
     let (filter, bad) = match std::env::var("SUPINE_LOG") {
@@ -128,13 +132,16 @@ fn main() -> std::process::ExitCode {
         Ok(cli) => cli,
         Err(e) => return clap_exit(&e),
     };
-    init_tracing(cli.verbose);
+    // `supine run` starts logging once its config (and its `[log] filter`) is read.
+    if !matches!(cli.command, Command::Run(_)) {
+        init_tracing(cli.verbose, None);
+    }
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Record(args) => record::run(args),
         Command::Replay(args) => replay::run(args),
-        Command::Run(args) => run::run(args),
+        Command::Run(args) => run::run(args, cli.verbose),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),
     };

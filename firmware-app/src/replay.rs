@@ -12,7 +12,6 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use supine_core::camera::Intrinsics;
 use supine_drivers::oni::OniReader;
 use supine_drivers::ros_bag::{self, McapSource};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
@@ -20,9 +19,9 @@ use supine_drivers::source::{DepthSource, SourceErrorKind};
 use crate::failure::Failure;
 use crate::foxglove::live::{self, LiveView};
 use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
-use crate::foxglove::{FrameRecord, ProbeOverlay, TorsoOverlay};
+use crate::foxglove::record_of;
 use crate::output::{self, Output};
-use crate::pipeline::{self, FrameView, PlayOptions};
+use crate::pipeline::{self, PlayOptions};
 use crate::truth::Truth;
 use crate::{note, numbers};
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
@@ -61,30 +60,6 @@ pub struct ReplayArgs {
     /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`.
     #[arg(long)]
     pub sink: Option<String>,
-}
-
-/// What the Foxglove outputs write for one tracked frame.
-fn record_of<'a>(v: &'a FrameView<'a, 'a>, intrinsics: Intrinsics) -> FrameRecord<'a> {
-    let r = v.report;
-    let pose = r.camera_from_torso;
-    FrameRecord {
-        capture: v.frame.capture,
-        depth: *v.frame,
-        intrinsics,
-        salient: r.salient_camera.as_ref(),
-        torso: pose
-            .zip(v.surface)
-            .map(|(camera_from_torso, surface)| TorsoOverlay {
-                surface,
-                camera_from_torso,
-            }),
-        probe: pose.zip(r.probe).map(|(p, m)| ProbeOverlay {
-            tip: p * m.tip,
-            surface_point: Some(p * m.nearest),
-        }),
-        packets: &r.packets,
-        state: Some(r.state),
-    }
 }
 
 /// Open the recording by its extension; returns the source and its frame count when the file says.

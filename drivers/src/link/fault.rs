@@ -56,6 +56,7 @@ pub struct FaultyLink<L> {
     config: LinkFaultConfig,
     rng: SplitMix64,
     stall_left: u32,
+    held: bool,
     sends: u64,
     active: bool,
     faults: FaultCounters,
@@ -70,6 +71,7 @@ impl<L: Link> FaultyLink<L> {
             config,
             rng,
             stall_left: 0,
+            held: false,
             sends: 0,
             active: true,
             faults: FaultCounters::default(),
@@ -82,6 +84,15 @@ impl<L: Link> FaultyLink<L> {
         if !active {
             self.stall_left = 0;
         }
+    }
+
+    /// Start (`true`) or end a stall held by the caller, whatever the probabilities say: while held, every call is
+    /// swallowed as in a drawn stall (a scripted "link stalled from frame A to frame B" in a soak test).
+    pub fn hold_stall(&mut self, held: bool) {
+        if held && !self.held {
+            self.faults.stalls += 1;
+        }
+        self.held = held;
     }
 
     /// The wrapped link.
@@ -103,6 +114,10 @@ impl<L: Link> FaultyLink<L> {
     fn stalled(&mut self) -> bool {
         if !self.active {
             return false;
+        }
+        if self.held {
+            self.faults.stalled_calls += 1;
+            return true;
         }
         if self.stall_left == 0 && self.config.stall_calls > 0 && self.rng.chance(self.config.stall) {
             self.stall_left = self.config.stall_calls;
