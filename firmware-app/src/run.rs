@@ -28,10 +28,10 @@ pub struct RunArgs {
     #[arg(long, group = "file", value_name = "FILE")]
     pub check_config: Option<PathBuf>,
     /// Also write the Foxglove channels (depth, scene, transforms, packets) to this MCAP file.
-    #[arg(long, value_name = "OUT.mcap", requires = "config")]
+    #[arg(long, value_name = "OUT.mcap", conflicts_with = "check_config")]
     pub record: Option<PathBuf>,
     /// Serve the same channels live over the Foxglove WebSocket protocol on PORT (all interfaces) or HOST:PORT.
-    #[arg(long, value_name = "PORT", value_parser = live::parse_addr, requires = "config")]
+    #[arg(long, value_name = "PORT", value_parser = live::parse_addr, conflicts_with = "check_config")]
     pub view: Option<std::net::SocketAddr>,
     /// With --view: wait up to this many seconds for a viewer to subscribe before the first frame.
     #[arg(long, value_name = "SECONDS", requires = "view", value_parser = numbers::positive_u32)]
