@@ -2,9 +2,10 @@
 //! fast as possible or `--realtime`, with `--record OUT.mcap` (Foxglove channels) and `--view PORT` (live Foxglove).
 //!
 //! Each frame goes through the tracker (`crate::pipeline::play`, the same loop as `supine demo`); [`record_of`] turns
-//! its report into the [`FrameRecord`] the Foxglove outputs write. With `--truth FILE` (a sequence's truth.jsonl,
-//! sequence.json beside it) the tracker gets the calibration and arm states from the truth's probe pose, and the
-//! summary reports accuracy. `--sink` sends the packets. Corrupt frames are counted and skipped, as the service
+//! its report into the `FrameRecord` the Foxglove outputs write. With `--truth FILE` (a sequence's truth.jsonl,
+//! sequence.json beside it) the tracker gets the calibration and arm states synthesised from the truth's probe pose
+//! (`crate::arm_track`), and the summary reports accuracy. `--arm FILE` (a sequence's arm.cobs, or any capture of
+//! arm-state messages in the serial framing) gives it the recorded arm states instead. `--sink` sends the packets. Corrupt frames are counted and skipped, as the service
 //! does. Cost per frame: the source's decode, the tracker, and when recording or viewing the Foxglove encoding.
 
 use std::path::PathBuf;
@@ -16,6 +17,7 @@ use supine_drivers::oni::OniReader;
 use supine_drivers::ros_bag::{self, McapSource};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
 
+use crate::arm_track::ArmTrack;
 use crate::failure::Failure;
 use crate::foxglove::live::{self, LiveView};
 use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
@@ -57,6 +59,10 @@ pub struct ReplayArgs {
     /// probe pose, and accuracy in the summary.
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
+    /// Arm states from this capture (a sequence's arm.cobs: arm-state messages in the serial framing), instead of
+    /// ones synthesised from --truth.
+    #[arg(long, value_name = "FILE")]
+    pub arm: Option<PathBuf>,
     /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`.
     #[arg(long)]
     pub sink: Option<String>,
@@ -123,6 +129,19 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         Some(p) => Some(Truth::load(p).map_err(|e| anyhow::anyhow!("--truth: {e:#}"))?),
         None => None,
     };
+    let arm = match &args.arm {
+        Some(p) => {
+            let track = ArmTrack::load(p).map_err(|e| anyhow::anyhow!("--arm: {e:#}"))?;
+            note!(
+                "supine replay: {} arm states from {} ({} undecodable frames skipped)",
+                track.len(),
+                p.display(),
+                track.bad_frames
+            );
+            Some(track)
+        }
+        None => None,
+    };
     let (mut src, total) = open(&args)?;
     let intrinsics = src.intrinsics();
     note!("supine replay: {}", src.describe());
@@ -162,6 +181,7 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     let opts = PlayOptions {
         realtime: args.realtime,
         skip_corrupt: true,
+        arm: arm.as_ref(),
         ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
     };
     let bar = progress(total.map(|t| t.min(opts.limit as u64)));
@@ -217,6 +237,14 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
             ),
         );
     }
+    row(
+        "arm states",
+        match (&args.arm, &truth) {
+            (Some(p), _) => format!("from {}", p.display()),
+            (None, Some(_)) => "synthesised from the truth's probe pose (seeded noise)".into(),
+            (None, None) => "none (probe mapping off)".into(),
+        },
+    );
     row("states (frames)", stats.states_line());
     row(
         "tracked after init",
