@@ -19,6 +19,7 @@ mod models;
 mod notify;
 mod numbers;
 mod output;
+mod overlay_png;
 mod pipeline;
 mod record;
 mod replay;
