@@ -142,7 +142,7 @@ fn arm_capture_of_the_demo(path: &std::path::Path) -> usize {
             continue;
         };
         let at = |r: usize, c: usize| rows[r][c].as_f64().unwrap() as f32;
-        let rot = Matrix3::from_fn(|r, c| at(r, c));
+        let rot = Matrix3::from_fn(at);
         let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot));
         let m = Message {
             seq: i as u16,

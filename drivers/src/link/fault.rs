@@ -389,4 +389,31 @@ mod tests {
             assert_ne!(bytes[8..], original[8..]);
         }
     }
+
+    #[test]
+    fn a_held_stall_queues_sends_until_released() {
+        let dir = std::env::temp_dir().join(format!("supine-hold-stall-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cap.bin");
+        let inner = super::super::open_str(&format!("file:{}", path.display()), &Default::default()).unwrap();
+        let mut link = FaultyLink::new(inner, LinkFaultConfig::default());
+        let msg = supine_core::wire::sample::messages()[0];
+        link.send(&msg).unwrap();
+        let sent = link.counters().sent;
+        assert_eq!(sent, 1);
+        link.hold_stall(true);
+        for _ in 0..(super::super::DEFAULT_QUEUE_CAPACITY + 8) {
+            link.send(&msg).unwrap();
+        }
+        let c = link.counters();
+        // Nothing moved; the full queue dropped its oldest messages (newest wins).
+        assert_eq!(c.sent, sent);
+        assert_eq!(c.dropped, 8);
+        assert_eq!((c.faults.stalls, c.faults.stalled_calls > 0), (1, true));
+        link.hold_stall(false);
+        link.poll();
+        assert!(link.counters().sent > sent);
+        link.close(Duration::from_secs(1)).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }
