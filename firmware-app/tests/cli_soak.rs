@@ -237,6 +237,7 @@ fn the_service_survives_a_soak_with_faults() {
             _ => None,
         })
         .collect();
+    assert_eq!(states.first(), Some(&TrackerState::Initialising));
     let first_pose = states.iter().position(|&s| pose_state(s)).expect("never tracked");
     let fault_at = states
         .iter()
