@@ -172,11 +172,24 @@ fn summary(path: &std::path::Path, c: &config::Checked) -> String {
         ),
         None => "none (probe mapping off)".into(),
     };
+    let at = |n: Option<u64>| n.map_or_else(|| "never".to_owned(), |n| format!("frame {n}"));
+    let faults = match &c.faults {
+        Some(f) => format!(
+            "  faults                 INJECTED, test only (seed {}, corrupt-frame probability {}, unplug at {}, \
+             link stall at {} for {} frames)\n",
+            f.seed,
+            f.corrupt_frames,
+            at(f.unplug_at_frame),
+            at(f.link_stall_at_frame),
+            f.link_stall_frames
+        ),
+        None => String::new(),
+    };
     format!(
         "{}: valid\n  source                 {}{}\n  link                   {}\n  body model             {}\n  \
          joint forest           {}\n  shape model            {}\n  frame budget           {:.1} ms, {} ICP \
          iterations\n  init                   {} shape frames, {:.0} s timeout\n  log filter             {}\n  \
-         robot_base_from_camera {extrinsic}\n",
+         robot_base_from_camera {extrinsic}\n{faults}",
         path.display(),
         c.source,
         if c.loop_source { " (looped)" } else { "" },
