@@ -38,6 +38,35 @@ pub struct Config {
     /// Camera-to-robot extrinsic (from `supine calibrate`); without it probe mapping is off.
     #[serde(default)]
     pub robot_base_from_camera: Option<Spanned<Extrinsic>>,
+    /// Test only: faults injected into the source and the link (the soak test); absent in production.
+    #[serde(default)]
+    pub faults: Option<Spanned<Faults>>,
+}
+
+/// `[faults]` (test only): seeded faults the service injects into its own source and link, through the same
+/// wrappers the driver tests use (`supine_drivers::fault::FaultySource`, `supine_drivers::link::FaultyLink`), so
+/// that a bench soak test exercises the real service loop. Never set this on a robot.
+#[derive(Debug, Clone, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Faults {
+    /// Generator seed (each reopen of the source draws from `seed` plus the reopen count).
+    pub seed: u64,
+    /// Probability that a frame is reported corrupt (0 to 1).
+    #[serde(default)]
+    pub corrupt_frames: f64,
+    /// After this many processed frames the sensor is unplugged once (every read fails until the service reopens it).
+    #[serde(default)]
+    pub unplug_at_frame: Option<u64>,
+    /// After this many processed frames the link stalls once: nothing is written or read for `link_stall_frames`.
+    #[serde(default)]
+    pub link_stall_at_frame: Option<u64>,
+    /// Frames a link stall lasts.
+    #[serde(default = "default_stall_frames")]
+    pub link_stall_frames: u64,
+}
+
+fn default_stall_frames() -> u64 {
+    30
 }
 
 /// `[models]`: where the model files are.
@@ -152,6 +181,8 @@ pub struct Checked {
     pub log_filter: String,
     /// Camera-to-robot extrinsic.
     pub robot_base_from_camera: Option<Isometry3>,
+    /// Test-only fault injection (`[faults]`).
+    pub faults: Option<Faults>,
 }
 
 /// A config error: the file, the line (when a key is to blame) and what is wrong.
@@ -266,6 +297,27 @@ pub fn parse(text: &str, path: &Path) -> Result<Checked, ConfigError> {
         None => None,
         Some(e) => Some(extrinsic(e.get_ref()).map_err(|what| at(e.span(), "robot_base_from_camera", what))?),
     };
+    let faults = match &raw.faults {
+        None => None,
+        Some(f) => {
+            let v = f.get_ref();
+            if !(0.0..=1.0).contains(&v.corrupt_frames) {
+                return Err(at(
+                    f.span(),
+                    "faults.corrupt_frames",
+                    format!("{} is out of range (allowed: 0 to 1)", v.corrupt_frames),
+                ));
+            }
+            if !(1..=100_000).contains(&v.link_stall_frames) {
+                return Err(at(
+                    f.span(),
+                    "faults.link_stall_frames",
+                    format!("{} is out of range (allowed: 1 to 100000)", v.link_stall_frames),
+                ));
+            }
+            Some(v.clone())
+        }
+    };
     let model = |p: &Path| {
         if p.is_absolute() {
             p.to_path_buf()
@@ -287,6 +339,7 @@ pub fn parse(text: &str, path: &Path) -> Result<Checked, ConfigError> {
         init_timeout_s: timeout,
         log_filter: filter,
         robot_base_from_camera,
+        faults,
     })
 }
 
@@ -403,5 +456,25 @@ rotation_quat_wxyz = [1.0, 0.0, 0.0, 0.0]
         let filter = format!("{GOOD}[log]\nfilter = \"supine=loud\"\n");
         assert!(err(&filter).contains("log.filter"), "{}", err(&filter));
         assert!(err("source = 3").contains("s.toml:1:"), "{}", err("source = 3"));
+        let faults = format!("{GOOD}[faults]\nseed = 1\ncorrupt_frames = 1.5\n");
+        assert!(err(&faults).contains("faults.corrupt_frames"), "{}", err(&faults));
+        let faults = format!("{GOOD}[faults]\nseed = 1\nunplug = 3\n");
+        assert!(err(&faults).contains("unplug"), "{}", err(&faults));
+    }
+
+    #[test]
+    fn faults_are_off_unless_configured() {
+        assert!(parse(GOOD, Path::new("s.toml")).unwrap().faults.is_none());
+        let text = format!("{GOOD}[faults]\nseed = 7\ncorrupt_frames = 0.1\nunplug_at_frame = 100\n");
+        let f = parse(&text, Path::new("s.toml")).unwrap().faults.unwrap();
+        assert_eq!(
+            (
+                f.seed,
+                f.unplug_at_frame,
+                f.link_stall_at_frame,
+                f.link_stall_frames
+            ),
+            (7, Some(100), None, 30)
+        );
     }
 }

@@ -1,8 +1,10 @@
-//! `supine demo`: the README's main job. The committed synthetic recording (2 s, a patient on a bed, the robot arm
-//! sweeping its probe over the torso) runs through the whole pipeline with the committed default models: the same
-//! `DepthSource` a live Kinect uses, the real-time tracker (init phase, joint forest, torso ICP with feedback, probe
-//! mapping), packets encoded and sent through the chosen link. A live status line, then a table: latency, the
-//! states, and accuracy against the recording's ground truth (truth.jsonl beside it), measured, never assumed.
+//! `supine demo`: the README's main job. The committed synthetic recording (4 s, a patient on a bed: the init
+//! phase, the robot arm sweeping its probe over the torso, then parking over the whole torso for 1 s and leaving)
+//! runs through the whole pipeline with the committed default models: the same `DepthSource` a live Kinect uses, the
+//! real-time tracker (init phase, joint forest, torso ICP with feedback, probe mapping from the recorded arm states,
+//! arm.cobs beside the recording), packets encoded and sent through the chosen link. A live status line, then a
+//! table: latency, the states, and accuracy against the recording's ground truth (truth.jsonl beside it), measured,
+//! never assumed. `--png FILE` draws one frame's overlay (`crate::overlay_png`).
 
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
@@ -12,14 +14,19 @@ use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
 use supine_drivers::source::{self, DepthSource, SourceSpec};
 use supine_drivers::tracker_host::{MODEL_FILES, ModelFiles};
 
+use crate::arm_track::ArmTrack;
 use crate::failure::Failure;
+use crate::foxglove::record_of;
 use crate::output::{self, Output};
+use crate::overlay_png;
 use crate::pipeline::{self, PlayOptions};
 use crate::truth::Truth;
 use crate::{note, note_raw};
+use supine_core::wire::TrackerState;
 
-/// Where the committed demo recording lives, relative to the repository root or the installed model directory.
-const DEMO_RECORDING: &str = "demo/sequence.oni";
+/// Where the committed demo recording lives, relative to the repository root or the installed model directory
+/// (`demo/sequence.oni`, 2 s without the full occlusion, is the tests' fixture).
+const DEMO_RECORDING: &str = "demo/occlusion/sequence.oni";
 
 /// Arguments of `supine demo`.
 #[derive(Args)]
@@ -37,6 +44,12 @@ pub struct DemoArgs {
     /// Also write the summary as JSON to this file.
     #[arg(long)]
     pub json: Option<PathBuf>,
+    /// Draw one frame (depth, fitted torso, salient points, probe) to this PNG file.
+    #[arg(long, value_name = "FILE")]
+    pub png: Option<PathBuf>,
+    /// With --png: the frame to draw, counted from 0 (default: the last one played).
+    #[arg(long, value_name = "N", requires = "png")]
+    pub png_frame: Option<u32>,
 }
 
 fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
@@ -93,6 +106,18 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         Some(p) => Some(Output::create("--json", p, &inputs)?),
         None => None,
     };
+    let png_out = match &args.png {
+        Some(p) => {
+            if args.json.as_deref() == Some(p.as_path()) {
+                return Err(Failure::usage(format!(
+                    "--png and --json are both {}; give them different files",
+                    p.display()
+                )));
+            }
+            Some(Output::create("--png", p, &inputs)?)
+        }
+        None => None,
+    };
     if let Some(LinkSpec::File { path: sink_path }) = &sink_spec {
         let mut others = inputs.to_vec();
         if let Some(j) = &args.json {
@@ -122,13 +147,33 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         note!("supine demo: no truth.jsonl beside the recording; accuracy is not measured");
         None
     };
-    let opts = PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref());
+    let arm_path = path.with_file_name("arm.cobs");
+    let arm = if arm_path.is_file() {
+        Some(ArmTrack::load(&arm_path).map_err(|e| anyhow::anyhow!("{e:#}"))?)
+    } else {
+        None
+    };
+    let opts = PlayOptions {
+        arm: arm.as_ref(),
+        ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
+    };
+    let intrinsics = src.intrinsics();
+    let mut picture = None;
+    let mut states = Vec::new();
     let started = Instant::now();
     let link: Option<&mut dyn Link> = match sink.as_mut() {
         Some(l) => Some(l.as_mut()),
         None => None,
     };
     let stats = pipeline::play(src.as_mut(), &files, &opts, link, |v, s| {
+        let wanted = match args.png_frame {
+            Some(n) => s.frames == n + 1,
+            None => true,
+        };
+        states.push(v.report.state);
+        if png_out.is_some() && wanted {
+            picture = Some(overlay_png::render(&record_of(v, intrinsics)));
+        }
         if s.frames % 10 == 0 || s.frames == 1 {
             let err = s
                 .torso_mm
@@ -202,6 +247,35 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         },
     );
     row("states (frames)", stats.states_line());
+    let recovery = truth.as_ref().and_then(|t| t.full_occlusion).map(|e| {
+        // Frames from the end of the park until the tracker tracks (not coasts) again.
+        let back = states
+            .iter()
+            .enumerate()
+            .skip(e.end as usize)
+            .find(|(_, s)| matches!(s, TrackerState::Tracking | TrackerState::Degraded))
+            .map(|(i, _)| i as u32 - e.end);
+        let during = states
+            .get(e.start as usize..(e.end as usize).min(states.len()))
+            .unwrap_or(&[]);
+        let coasted = during.iter().filter(|s| **s == TrackerState::Occluded).count();
+        (e, back, coasted)
+    });
+    if let Some((e, back, coasted)) = recovery {
+        row(
+            "full occlusion",
+            format!(
+                "frames {}..{} (arm parked over the torso): {coasted} of {} frames coasted as occluded, {}",
+                e.start,
+                e.end,
+                e.end - e.start,
+                match back {
+                    Some(n) => format!("tracking again {n} frames after it"),
+                    None => "not tracking again by the end".to_owned(),
+                }
+            ),
+        );
+    }
     row(
         "tracked after init",
         format!("{:.1} %", stats.tracked_fraction() * 100.0),
@@ -234,8 +308,28 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     if let Some(msg) = sink_failure {
         return Err(anyhow::anyhow!(msg).into());
     }
+    if let Some(mut out) = png_out {
+        let pic = picture.ok_or_else(|| {
+            anyhow::anyhow!(
+                "--png-frame {}: the recording has only {} frames",
+                args.png_frame.unwrap_or(0),
+                stats.frames
+            )
+        })?;
+        let target = out.target().display().to_string();
+        let mut w = std::io::BufWriter::new(out.file());
+        pic.write_png(&mut w)
+            .map_err(anyhow::Error::from)
+            .and_then(|()| std::io::Write::flush(&mut w).map_err(anyhow::Error::from))
+            .map_err(|e| anyhow::anyhow!("--png {target}: {e}"))?;
+        drop(w);
+        out.commit()?;
+    }
     if let Some(out) = json_out {
         let mut report = stats.json();
+        if let Some((_, back, _)) = recovery {
+            report["recovery_frames"] = serde_json::json!(back);
+        }
         report["packets_dropped"] = dropped.into();
         report["recording"] = path.display().to_string().into();
         let text = serde_json::to_string_pretty(&report).map_err(anyhow::Error::from)?;

@@ -4,11 +4,13 @@
 //! 2 on bad usage; errors name the bad argument or file. A closed stdout pipe (`| head`) ends quietly with 141, the
 //! status of a program killed by SIGPIPE; a failure to write stderr turns a success into exit 1.
 
+mod arm_track;
 mod calibrate;
 mod config;
 mod console;
 mod demo;
 mod failure;
+mod faults;
 mod foxglove;
 mod info;
 mod links;
@@ -17,6 +19,7 @@ mod models;
 mod notify;
 mod numbers;
 mod output;
+mod overlay_png;
 mod pipeline;
 mod record;
 mod replay;
@@ -62,13 +65,16 @@ enum Command {
     Wire(wire::WireCommand),
 }
 
-fn init_tracing(verbose: u8) {
+/// Logging to stderr: `SUPINE_LOG` when set, else `-v`'s level, else `config_filter` (`supine run`'s `[log]
+/// filter`), else warnings only.
+pub fn init_tracing(verbose: u8, config_filter: Option<&str>) {
     use std::io::IsTerminal;
     use tracing_subscriber::EnvFilter;
-    let default = match verbose {
-        0 => "warn",
-        1 => "info",
-        2 => "debug",
+    let default = match (verbose, config_filter) {
+        (0, Some(f)) => f,
+        (0, None) => "warn",
+        (1, _) => "info",
+        (2, _) => "debug",
         _ => "trace",
     };
     let (filter, bad) = match std::env::var("SUPINE_LOG") {
@@ -128,13 +134,16 @@ fn main() -> std::process::ExitCode {
         Ok(cli) => cli,
         Err(e) => return clap_exit(&e),
     };
-    init_tracing(cli.verbose);
+    // `supine run` starts logging once its config (and its `[log] filter`) is read.
+    if !matches!(cli.command, Command::Run(_)) {
+        init_tracing(cli.verbose, None);
+    }
     let result = match cli.command {
         Command::Demo(args) => demo::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Record(args) => record::run(args),
         Command::Replay(args) => replay::run(args),
-        Command::Run(args) => run::run(args),
+        Command::Run(args) => run::run(args, cli.verbose),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),
     };

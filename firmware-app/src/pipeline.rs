@@ -11,17 +11,19 @@ use std::time::Duration;
 
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::geometry::{Isometry3, Point3, Vector3};
+use supine_core::geometry::{Isometry3, Vector3};
 use supine_core::torso::TorsoSurface;
 use supine_core::tracker::accuracy::{self, TrackedFrame};
-use supine_core::tracker::{ArmSample, FrameReport, ScratchSizes, Tracker, TrackerConfig};
+use supine_core::tracker::{FrameReport, ScratchSizes, Tracker, TrackerConfig};
 use supine_core::wire::{Message, TrackerState};
 use supine_drivers::clock::MonotonicClock;
 use supine_drivers::link::Link;
 use supine_drivers::source::{DepthSource, SourceErrorKind};
 use supine_drivers::tracker_host::{ModelFiles, OwnedTorso, TrackerScratch};
 
+use crate::arm_track::{self, ArmTrack};
 use crate::truth::Truth;
+use supine_core::rng::SplitMix64;
 
 /// The tracker settings for a camera whose pose in `robot_base` is `robot_base_from_camera` (up is `robot_base`'s
 /// +z, which the bed search uses).
@@ -136,8 +138,10 @@ impl RunStats {
 pub struct PlayOptions<'a> {
     /// Stop after this many frames.
     pub limit: u32,
-    /// Truth to score against (and to synthesise arm states from when the recording has no arm file).
+    /// Truth to score against (and to synthesise arm states from when there is no `arm` track).
     pub truth: Option<&'a Truth>,
+    /// Arm states from a capture file (`replay --arm`); they replace the ones synthesised from the truth.
+    pub arm: Option<&'a ArmTrack>,
     /// The tracker settings.
     pub tracker: TrackerConfig,
     /// Play at the recorded rate (capture timestamps) instead of as fast as possible.
@@ -156,6 +160,7 @@ impl<'a> PlayOptions<'a> {
         PlayOptions {
             limit,
             truth,
+            arm: None,
             tracker: tracker_config(rb),
             realtime: false,
             skip_corrupt: false,
@@ -192,17 +197,6 @@ impl std::fmt::Display for PlayError {
 
 impl std::error::Error for PlayError {}
 
-/// An arm state synthesised from the truth: the true probe tip in `robot_base`, sampled at the frame's time.
-fn arm_from_truth(truth: &Truth, i: usize, frame: &DepthFrame<'_>) -> Option<ArmSample> {
-    let m = truth.frame(i)?.world_from_probe.as_ref()?;
-    let p = supine_core::geometry::isometry_from_rows(m);
-    Some(ArmSample {
-        time: frame.capture,
-        tip_robot_base: Point3::from(p.translation.vector),
-        robot_base_from_probe: p.rotation,
-    })
-}
-
 /// Play `src` through the tracker: packets to `sink` (when given), `observe` called per frame; returns the figures.
 pub fn play(
     src: &mut dyn DepthSource,
@@ -230,6 +224,7 @@ pub fn play(
     let mut buf = [0u8; supine_core::wire::serial::MAX_WIRE_LEN];
     let started = std::time::Instant::now();
     let mut first_capture = None;
+    let mut arm_noise = SplitMix64(arm_track::SYNTH_SEED);
     while stats.frames < opts.limit {
         let frame = match src.next_frame(Duration::from_millis(500)) {
             Ok(f) => f,
@@ -262,7 +257,12 @@ pub fn play(
             }
         }
         let i = stats.frames as usize;
-        let arm = opts.truth.and_then(|t| arm_from_truth(t, i, &frame));
+        // The probe errors are measured against the true probe; the tracker gets what an arm would report.
+        let true_arm = opts.truth.and_then(|t| arm_track::from_truth(t, i, &frame));
+        let arm = match opts.arm {
+            Some(track) => track.at(frame.capture).copied(),
+            None => true_arm.map(|a| arm_track::synthesise(&a, &mut arm_noise)),
+        };
         let report = tracker.process(&frame, arm.as_ref(), &clock);
         stats.frames += 1;
         stats.latency_us.push(report.times.total());
@@ -290,7 +290,8 @@ pub fn play(
                     camera_from_torso: supine_core::geometry::isometry_from_rows(&truth.camera_from_torso),
                     salient_camera: truth.salient(),
                 },
-                arm.as_ref()
+                true_arm
+                    .as_ref()
                     .map(|a| (&a.tip_robot_base, &opts.tracker.robot_base_from_camera)),
             );
             stats.torso_mm.push(a.torso_m * 1000.0);

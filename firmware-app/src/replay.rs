@@ -2,9 +2,10 @@
 //! fast as possible or `--realtime`, with `--record OUT.mcap` (Foxglove channels) and `--view PORT` (live Foxglove).
 //!
 //! Each frame goes through the tracker (`crate::pipeline::play`, the same loop as `supine demo`); [`record_of`] turns
-//! its report into the [`FrameRecord`] the Foxglove outputs write. With `--truth FILE` (a sequence's truth.jsonl,
-//! sequence.json beside it) the tracker gets the calibration and arm states from the truth's probe pose, and the
-//! summary reports accuracy. `--sink` sends the packets. Corrupt frames are counted and skipped, as the service
+//! its report into the `FrameRecord` the Foxglove outputs write. With `--truth FILE` (a sequence's truth.jsonl,
+//! sequence.json beside it) the tracker gets the calibration and arm states synthesised from the truth's probe pose
+//! (`crate::arm_track`), and the summary reports accuracy. `--arm FILE` (a sequence's arm.cobs, or any capture of
+//! arm-state messages in the serial framing) gives it the recorded arm states instead. `--sink` sends the packets. Corrupt frames are counted and skipped, as the service
 //! does. Cost per frame: the source's decode, the tracker, and when recording or viewing the Foxglove encoding.
 
 use std::path::PathBuf;
@@ -12,17 +13,17 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
-use supine_core::camera::Intrinsics;
 use supine_drivers::oni::OniReader;
 use supine_drivers::ros_bag::{self, McapSource};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
 
+use crate::arm_track::ArmTrack;
 use crate::failure::Failure;
 use crate::foxglove::live::{self, LiveView};
 use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
-use crate::foxglove::{FrameRecord, ProbeOverlay, TorsoOverlay};
+use crate::foxglove::record_of;
 use crate::output::{self, Output};
-use crate::pipeline::{self, FrameView, PlayOptions};
+use crate::pipeline::{self, PlayOptions};
 use crate::truth::Truth;
 use crate::{note, numbers};
 use supine_drivers::link::{self, Link, LinkOptions, LinkSpec};
@@ -58,33 +59,13 @@ pub struct ReplayArgs {
     /// probe pose, and accuracy in the summary.
     #[arg(long, value_name = "FILE")]
     pub truth: Option<PathBuf>,
+    /// Arm states from this capture (a sequence's arm.cobs: arm-state messages in the serial framing), instead of
+    /// ones synthesised from --truth.
+    #[arg(long, value_name = "FILE")]
+    pub arm: Option<PathBuf>,
     /// Where the packets go: `stdout`, `serial:PATH[@BAUD]`, `slcan:PATH[@BAUD]`, `can:IFACE`, `file:PATH`.
     #[arg(long)]
     pub sink: Option<String>,
-}
-
-/// What the Foxglove outputs write for one tracked frame.
-fn record_of<'a>(v: &'a FrameView<'a, 'a>, intrinsics: Intrinsics) -> FrameRecord<'a> {
-    let r = v.report;
-    let pose = r.camera_from_torso;
-    FrameRecord {
-        capture: v.frame.capture,
-        depth: *v.frame,
-        intrinsics,
-        salient: r.salient_camera.as_ref(),
-        torso: pose
-            .zip(v.surface)
-            .map(|(camera_from_torso, surface)| TorsoOverlay {
-                surface,
-                camera_from_torso,
-            }),
-        probe: pose.zip(r.probe).map(|(p, m)| ProbeOverlay {
-            tip: p * m.tip,
-            surface_point: Some(p * m.nearest),
-        }),
-        packets: &r.packets,
-        state: Some(r.state),
-    }
 }
 
 /// Open the recording by its extension; returns the source and its frame count when the file says.
@@ -148,6 +129,19 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         Some(p) => Some(Truth::load(p).map_err(|e| anyhow::anyhow!("--truth: {e:#}"))?),
         None => None,
     };
+    let arm = match &args.arm {
+        Some(p) => {
+            let track = ArmTrack::load(p).map_err(|e| anyhow::anyhow!("--arm: {e:#}"))?;
+            note!(
+                "supine replay: {} arm states from {} ({} undecodable frames skipped)",
+                track.len(),
+                p.display(),
+                track.bad_frames
+            );
+            Some(track)
+        }
+        None => None,
+    };
     let (mut src, total) = open(&args)?;
     let intrinsics = src.intrinsics();
     note!("supine replay: {}", src.describe());
@@ -187,6 +181,7 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     let opts = PlayOptions {
         realtime: args.realtime,
         skip_corrupt: true,
+        arm: arm.as_ref(),
         ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
     };
     let bar = progress(total.map(|t| t.min(opts.limit as u64)));
@@ -242,6 +237,14 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
             ),
         );
     }
+    row(
+        "arm states",
+        match (&args.arm, &truth) {
+            (Some(p), _) => format!("from {}", p.display()),
+            (None, Some(_)) => "synthesised from the truth's probe pose (seeded noise)".into(),
+            (None, None) => "none (probe mapping off)".into(),
+        },
+    );
     row("states (frames)", stats.states_line());
     row(
         "tracked after init",

@@ -22,6 +22,22 @@ pub struct TruthFrame {
 struct Meta {
     shape: Vec<f32>,
     camera_from_world: [[f32; 4]; 4],
+    #[serde(default)]
+    episodes: Option<Episodes>,
+}
+
+#[derive(Debug, Clone, serde::Deserialize)]
+struct Episodes {
+    full_occlusion: Option<FullOcclusion>,
+}
+
+/// The episode where the arm parks over the whole torso (`sequence --full-occlusion`).
+#[derive(Debug, Clone, Copy, serde::Deserialize)]
+pub struct FullOcclusion {
+    /// First parked frame.
+    pub start: u32,
+    /// First frame after the park (recovery counts from here).
+    pub end: u32,
 }
 
 /// The truth of one recording.
@@ -33,6 +49,8 @@ pub struct Truth {
     pub robot_base_from_camera: Isometry3,
     /// One entry per frame, in order.
     pub frames: Vec<TruthFrame>,
+    /// The full-occlusion episode, when the sequence has one.
+    pub full_occlusion: Option<FullOcclusion>,
 }
 
 impl Truth {
@@ -58,6 +76,7 @@ impl Truth {
             shape: meta.shape,
             robot_base_from_camera: isometry_from_rows(&meta.camera_from_world).inverse(),
             frames,
+            full_occlusion: meta.episodes.and_then(|e| e.full_occlusion),
         })
     }
 

@@ -325,3 +325,30 @@ fn an_output_through_a_symlink_replaces_the_file_and_keeps_the_link() {
     );
     assert_eq!(files_in(&dir.join("reports")), ["latest.json"]);
 }
+
+#[test]
+fn demo_draws_the_overlay_png_of_a_frame() {
+    let dir = scratch("demo-png");
+    let out = run_within(
+        supine()
+            .current_dir(&dir)
+            .args(["demo", "--frames", "12", "--png", "f.png", "--png-frame", "11"]),
+        LIMIT,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let png = std::fs::read(dir.join("f.png")).unwrap();
+    assert_eq!(&png[..8], b"\x89PNG\r\n\x1a\n");
+    // IHDR: 640 x 480, 8-bit RGB.
+    assert_eq!(&png[16..26], &[0, 0, 2, 128, 0, 0, 1, 224, 8, 2]);
+
+    // A frame past the end is an error, and no file is left behind.
+    let out = run_within(
+        supine()
+            .current_dir(&dir)
+            .args(["demo", "--frames", "3", "--png", "g.png", "--png-frame", "5"]),
+        LIMIT,
+    );
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--png-frame 5"), "{}", stderr(&out));
+    assert_eq!(files_in(&dir), ["f.png"]);
+}

@@ -126,3 +126,83 @@ fn view_flags_are_checked() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2), "--view-wait needs --view");
 }
+
+/// The demo's true probe poses as an arm capture (arm-state messages in the serial framing, as arm.cobs holds
+/// them), 5 ms after each frame's capture.
+fn arm_capture_of_the_demo(path: &std::path::Path) -> usize {
+    use supine_core::geometry::{Matrix3, Rotation3, UnitQuaternion};
+    use supine_core::time::Timestamp;
+    use supine_core::wire::{ArmState, Body, Message, UnitQuatQ14};
+    let truth = std::fs::read_to_string(demo_recording().with_file_name("truth.jsonl")).unwrap();
+    let mut bytes = Vec::new();
+    let mut n = 0;
+    for (i, line) in truth.lines().enumerate() {
+        let v: serde_json::Value = serde_json::from_str(line).unwrap();
+        let Some(rows) = v["world_from_probe"].as_array() else {
+            continue;
+        };
+        let at = |r: usize, c: usize| rows[r][c].as_f64().unwrap() as f32;
+        let rot = Matrix3::from_fn(at);
+        let q = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(rot));
+        let m = Message {
+            seq: i as u16,
+            timestamp: Timestamp::from_us(v["time_us"].as_u64().unwrap() + 5_000).unwrap(),
+            body: Body::ArmState(ArmState {
+                position_mm: [0, 1, 2].map(|r| (at(r, 3) * 1000.0).round() as i32),
+                orientation: UnitQuatQ14::from_f32([q.w, q.i, q.j, q.k]).unwrap(),
+            }),
+        };
+        let mut buf = [0u8; supine_core::wire::serial::MAX_WIRE_LEN];
+        let len = m.encode_serial(&mut buf).unwrap();
+        bytes.extend_from_slice(&buf[..len]);
+        n += 1;
+    }
+    std::fs::write(path, bytes).unwrap();
+    n
+}
+
+#[test]
+fn replay_takes_arm_states_from_a_capture() {
+    let dir = scratch("replay-arm");
+    let arm = dir.join("arm.cobs");
+    let n = arm_capture_of_the_demo(&arm);
+    assert!(n > 10, "the demo has the arm in {n} frames");
+    let truth = demo_recording().with_file_name("truth.jsonl");
+    let out = supine()
+        .current_dir(&dir)
+        .args(["replay", "--frames", "30", "--json", "r.json", "--truth"])
+        .arg(&truth)
+        .arg("--arm")
+        .arg(&arm)
+        .arg(demo_recording())
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    assert!(
+        text(&out.stderr).contains(&format!("{n} arm states from")),
+        "{}",
+        text(&out.stderr)
+    );
+    assert!(text(&out.stdout).contains("arm states"), "{}", text(&out.stdout));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
+    // The tracker mapped the probe from the recorded states, and it is scored against the truth.
+    let probe = report["probe_error_mm_mean"]
+        .as_f64()
+        .expect("no probe error with --arm");
+    assert!(probe.is_finite() && probe < 500.0, "{report}");
+
+    std::fs::write(dir.join("junk.cobs"), b"\x00garbage\x00").unwrap();
+    let out = supine()
+        .current_dir(&dir)
+        .args(["replay", "--arm", "junk.cobs"])
+        .arg(demo_recording())
+        .output()
+        .unwrap();
+    assert_eq!(out.status.code(), Some(1), "{}", text(&out.stderr));
+    let err = text(&out.stderr);
+    assert!(
+        err.contains("--arm") && err.contains("junk.cobs") && err.contains("no arm state"),
+        "{err}"
+    );
+}

@@ -137,3 +137,74 @@ fn sigterm_ends_a_looping_service_cleanly() {
         "{states:?}"
     );
 }
+
+#[test]
+fn the_service_records_mcap_and_applies_the_log_filter() {
+    let dir = scratch("run-record");
+    let cfg = config(&dir, false);
+    // [log] filter = "info" instead of "warn": the state changes are logged at info.
+    let text = std::fs::read_to_string(&cfg)
+        .unwrap()
+        .replace("filter = \"warn\"", "filter = \"info\"");
+    std::fs::write(&cfg, text).unwrap();
+    let mcap = dir.join("run.mcap");
+    let out = run_within(
+        supine()
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .arg("--record")
+            .arg(&mcap),
+        LIMIT,
+    );
+    let err = stderr(&out);
+    assert!(out.status.success(), "{err}");
+    assert!(
+        err.contains("init phase done; tracking"),
+        "[log] filter not applied: {err}"
+    );
+    let bytes = std::fs::read(&mcap).unwrap();
+    assert_eq!(&bytes[..8], b"\x89MCAP0\r\n");
+    assert_eq!(
+        &bytes[bytes.len() - 8..],
+        b"\x89MCAP0\r\n",
+        "the MCAP was finished"
+    );
+    // The service drops frames rather than wait for the recorder; most of the 60 still arrive.
+    let line = err
+        .lines()
+        .find(|l| l.contains("frames recorded to"))
+        .expect(&err);
+    let recorded: u64 = line
+        .split_whitespace()
+        .skip_while(|w| *w != "outputs:")
+        .nth(1)
+        .and_then(|w| w.parse().ok())
+        .expect(line);
+    assert!((1..=60).contains(&recorded), "{line}");
+
+    // SUPINE_LOG wins over the config: at error level the info lines are gone.
+    let out = run_within(
+        supine()
+            .args(["run", "--config"])
+            .arg(&cfg)
+            .env("SUPINE_LOG", "error"),
+        LIMIT,
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(!stderr(&out).contains("init phase done"), "{}", stderr(&out));
+}
+
+#[test]
+fn record_and_view_need_a_config_to_run() {
+    let dir = scratch("run-record-check");
+    let cfg = config(&dir, false);
+    let out = run_within(
+        supine()
+            .args(["run", "--check-config"])
+            .arg(&cfg)
+            .args(["--record", "x.mcap"]),
+        LIMIT,
+    );
+    assert_eq!(out.status.code(), Some(2), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--check-config"), "{}", stderr(&out));
+}

@@ -56,6 +56,7 @@ pub struct FaultyLink<L> {
     config: LinkFaultConfig,
     rng: SplitMix64,
     stall_left: u32,
+    held: bool,
     sends: u64,
     active: bool,
     faults: FaultCounters,
@@ -70,6 +71,7 @@ impl<L: Link> FaultyLink<L> {
             config,
             rng,
             stall_left: 0,
+            held: false,
             sends: 0,
             active: true,
             faults: FaultCounters::default(),
@@ -82,6 +84,15 @@ impl<L: Link> FaultyLink<L> {
         if !active {
             self.stall_left = 0;
         }
+    }
+
+    /// Start (`true`) or end a stall held by the caller, whatever the probabilities say: while held, every call is
+    /// swallowed as in a drawn stall (a scripted "link stalled from frame A to frame B" in a soak test).
+    pub fn hold_stall(&mut self, held: bool) {
+        if held && !self.held {
+            self.faults.stalls += 1;
+        }
+        self.held = held;
     }
 
     /// The wrapped link.
@@ -103,6 +114,10 @@ impl<L: Link> FaultyLink<L> {
     fn stalled(&mut self) -> bool {
         if !self.active {
             return false;
+        }
+        if self.held {
+            self.faults.stalled_calls += 1;
+            return true;
         }
         if self.stall_left == 0 && self.config.stall_calls > 0 && self.rng.chance(self.config.stall) {
             self.stall_left = self.config.stall_calls;
@@ -373,5 +388,32 @@ mod tests {
             assert_eq!(bytes[..8], original[..8]);
             assert_ne!(bytes[8..], original[8..]);
         }
+    }
+
+    #[test]
+    fn a_held_stall_queues_sends_until_released() {
+        let dir = std::env::temp_dir().join(format!("supine-hold-stall-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("cap.bin");
+        let inner = super::super::open_str(&format!("file:{}", path.display()), &Default::default()).unwrap();
+        let mut link = FaultyLink::new(inner, LinkFaultConfig::default());
+        let msg = supine_core::wire::sample::messages()[0];
+        link.send(&msg).unwrap();
+        let sent = link.counters().sent;
+        assert_eq!(sent, 1);
+        link.hold_stall(true);
+        for _ in 0..(super::super::DEFAULT_QUEUE_CAPACITY + 8) {
+            link.send(&msg).unwrap();
+        }
+        let c = link.counters();
+        // Nothing moved; the full queue dropped its oldest messages (newest wins).
+        assert_eq!(c.sent, sent);
+        assert_eq!(c.dropped, 8);
+        assert_eq!((c.faults.stalls, c.faults.stalled_calls > 0), (1, true));
+        link.hold_stall(false);
+        link.poll();
+        assert!(link.counters().sent > sent);
+        link.close(Duration::from_secs(1)).unwrap();
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }

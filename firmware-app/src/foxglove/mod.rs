@@ -175,5 +175,29 @@ impl LogClock {
     }
 }
 
+/// What the Foxglove outputs write for one tracked frame.
+pub fn record_of<'a>(v: &'a crate::pipeline::FrameView<'a, 'a>, intrinsics: Intrinsics) -> FrameRecord<'a> {
+    let r = v.report;
+    let pose = r.camera_from_torso;
+    FrameRecord {
+        capture: v.frame.capture,
+        depth: *v.frame,
+        intrinsics,
+        salient: r.salient_camera.as_ref(),
+        torso: pose
+            .zip(v.surface)
+            .map(|(camera_from_torso, surface)| TorsoOverlay {
+                surface,
+                camera_from_torso,
+            }),
+        probe: pose.zip(r.probe).map(|(p, m)| ProbeOverlay {
+            tip: p * m.tip,
+            surface_point: Some(p * m.nearest),
+        }),
+        packets: &r.packets,
+        state: Some(r.state),
+    }
+}
+
 #[cfg(test)]
 mod tests;

@@ -31,8 +31,6 @@ pub enum Pace {
     /// Wait for room: every frame is recorded (replay).
     Lossless,
     /// Drop the new frame and count it: the loop never waits (the real-time service).
-    // `supine run` (the tracker issue) is the caller outside the tests; remove the allow when it lands.
-    #[allow(dead_code)]
     DropWhenBusy,
 }
 
