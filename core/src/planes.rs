@@ -558,6 +558,29 @@ fn mark(points: &[Point3], labels: &mut [u8], plane: &Plane, inlier_m: f32, labe
     m
 }
 
+/// The largest plane among `points` (RANSAC with `cfg`, then least squares), its normal turned toward the camera:
+/// "up" where nothing else is known about the scene (the mattress and the floor are parallel, so either will do).
+/// Cost: `cfg.iterations` hypotheses scored on at most 2048 points.
+pub fn largest_plane(points: &[Point3], labels: &mut [u8], cfg: &PlaneConfig) -> Option<Plane> {
+    let n = points.len().min(labels.len());
+    if n < 3 {
+        return None;
+    }
+    let (points, labels) = (&points[..n], &mut labels[..n]);
+    labels.fill(FREE);
+    let mut rng = SplitMix64::new(cfg.seed);
+    let p = ransac(points, labels, cfg, &mut rng, &|_| true)?;
+    // The camera sits at the origin, on the side the normal should point to.
+    Some(if p.d < 0.0 {
+        Plane {
+            normal: (-p.normal()).into(),
+            d: -p.d,
+        }
+    } else {
+        p
+    })
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;

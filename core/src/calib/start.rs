@@ -1,0 +1,501 @@
+//! The guess-free start of a calibration: find the probe tip without any extrinsic guess, from what moves and
+//! where "down" is, and pair it with the arm's tip for a first, rough Kabsch whose result then serves as the prior
+//! of the precise detector ([`super::tip`]).
+//!
+//! With the bed empty or the patient still, the arm is the only thing that moves: the per-pixel farthest depth
+//! over one still frame of each pose ([`accumulate_background`]) is the scene without the arm wherever the arm
+//! was somewhere else in another pose. In each pose's frame, the foreground (nearer than that background) above
+//! the largest plane ([`background_up`]: the mattress or the floor, both horizontal) is the moving part of the arm.
+//! The probe points down, so its tip is a local lowest point of the foreground: points are taken in rising height
+//! and each joins a lower neighbour's component or starts its own; components with enough points are the
+//! candidates ([`low_points`]). Which candidate is the tip is decided across poses ([`choose_tips`]): the arm's tip
+//! height above its base and the candidate's height above the plane differ by the same constant at every pose
+//! (the base stands level, `robot_base` z up), so the offset most poses agree on picks one candidate per pose
+//! (elbow, forearm and arm parts cut by the image border give offsets that agree with nothing).
+//!
+//! Accuracy: the lowest seen point is a corner of the head's end face, up to ~1.5 cm across the axis from the tip
+//! (its height is corrected from the arm's orientation, its sideways offset is not known before the extrinsic),
+//! so the rough solve takes a 4 cm inlier threshold ([`rough_solve_options`]) and its result a 6 cm prior.
+//!
+//! Cost: once per pose, one pass over the frame (at most `N` foreground points kept, the stride grows until they
+//! fit), a sort of those points by height and a neighbour search within a 2.5 cm height band (~5 ms); the
+//! background is one max per pixel per pose; the vote is quadratic in the candidates (a few hundred at most).
+//! Nothing allocates: the caller lends the background image and [`StartScratch`].
+
+use crate::camera::Intrinsics;
+use crate::depth::DepthFrame;
+use crate::geometry::{Plane, Point3, UnitQuaternion, Vector3};
+use crate::planes::{PlaneConfig, largest_plane};
+
+use super::solve::SolveOptions;
+use super::tip::ProbeShape;
+
+/// Settings of the guess-free detection.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartOptions {
+    /// A pixel is foreground when it is at least this much nearer than the background, metres (the background is
+    /// a maximum over noisy frames, so it lies up to ~2 sd beyond the surface).
+    pub foreground_m: f32,
+    /// Foreground points lower than this above the plane are ignored (a hand resting on the bed, noise), metres.
+    pub min_height_m: f32,
+    /// Nor higher than this (the arm's base and whatever stands tall beside the bed), metres.
+    pub max_height_m: f32,
+    /// Two foreground points are neighbours within this distance, metres.
+    pub neighbour_m: f32,
+    /// Fewest points of a component for it to be a candidate.
+    pub min_support: u32,
+    /// Tip heights of the candidates and the arm agree within this, metres.
+    pub vote_tolerance_m: f32,
+    /// The probe (its head box locates the tip from its lowest corner).
+    pub shape: ProbeShape,
+}
+
+impl Default for StartOptions {
+    /// 4 cm foreground margin, 5 cm–1.2 m above the plane, 2.5 cm neighbours, 12 points, 3 cm vote tolerance,
+    /// the synthetic probe.
+    fn default() -> Self {
+        StartOptions {
+            foreground_m: 0.04,
+            min_height_m: 0.05,
+            max_height_m: 1.2,
+            neighbour_m: 0.025,
+            min_support: 12,
+            vote_tolerance_m: 0.03,
+            shape: ProbeShape::SYNTHETIC,
+        }
+    }
+}
+
+/// Options of the rough solve over guess-free pairs: a 4 cm inlier threshold (the pairs are ~1.5 cm apart from
+/// the truth across the probe axis) and no residual limit; the condition and count limits stay.
+pub fn rough_solve_options() -> SolveOptions {
+    SolveOptions {
+        inlier_threshold_m: 0.04,
+        max_rms_residual_m: f32::INFINITY,
+        ..SolveOptions::default()
+    }
+}
+
+/// Fold a frame into the background: the farthest depth seen at each pixel (0, no depth, never wins). False (and
+/// nothing done) when the sizes differ.
+pub fn accumulate_background(background: &mut [u16], frame: &DepthFrame<'_>) -> bool {
+    let d = frame.depth_mm();
+    if background.len() != d.len() {
+        return false;
+    }
+    for (b, &v) in background.iter_mut().zip(d) {
+        *b = (*b).max(v);
+    }
+    true
+}
+
+/// "Up" in the camera: the largest plane of the background (mattress or floor), normal toward the camera, height
+/// measured from it. `points` and `labels` are scratch of at least
+/// [`crate::planes::scratch_points`]`(width, height, 6)` entries; `None` when no plane is found.
+pub fn background_up(
+    background: &[u16],
+    width: u16,
+    height: u16,
+    k: &Intrinsics,
+    points: &mut [Point3],
+    labels: &mut [u8],
+) -> Option<Plane> {
+    let (w, h) = (width as usize, height as usize);
+    if background.len() != w * h {
+        return None;
+    }
+    let cfg = PlaneConfig::default();
+    let stride = cfg.stride.max(1) as usize;
+    let mut n = 0;
+    for v in (0..h).step_by(stride) {
+        for u in (0..w).step_by(stride) {
+            let d = background[v * w + u];
+            if d == 0 || n == points.len() {
+                continue;
+            }
+            points[n] = k.unproject(u as f32, v as f32, d as f32 * 0.001);
+            n += 1;
+        }
+    }
+    largest_plane(&points[..n], labels, &cfg)
+}
+
+/// A local lowest point of the foreground: a candidate for the probe tip.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LowPoint {
+    /// The point, `camera` frame, metres (the `min_support / 4`-th lowest of its component, so that a stray
+    /// pixel below it does not decide).
+    pub point: Point3,
+    /// Its height above the plane, metres.
+    pub height_m: f32,
+    /// Points of its component.
+    pub support: u32,
+}
+
+/// Working memory of [`low_points`]: up to `N` foreground points, their component and the components' sizes.
+#[derive(Debug, Clone)]
+pub struct StartScratch<const N: usize> {
+    points: [Point3; N],
+    component: [u16; N],
+    size: [u32; N],
+    low: [u16; N],
+}
+
+impl<const N: usize> Default for StartScratch<N> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const N: usize> StartScratch<N> {
+    /// Empty scratch (`N` at most 65 535).
+    pub const fn new() -> Self {
+        StartScratch {
+            points: [Point3::new(0.0, 0.0, 0.0); N],
+            component: [0; N],
+            size: [0; N],
+            low: [0; N],
+        }
+    }
+}
+
+/// The local lowest points of the foreground of `frame` (nearer than `background` by
+/// [`StartOptions::foreground_m`], within the height range above `up`), lowest first, into `out`; returns how many.
+pub fn low_points<const N: usize>(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    background: &[u16],
+    up: &Plane,
+    options: &StartOptions,
+    scratch: &mut StartScratch<N>,
+    out: &mut [LowPoint],
+) -> usize {
+    let depth = frame.depth_mm();
+    if background.len() != depth.len() || out.is_empty() || N == 0 || N > u16::MAX as usize {
+        return 0;
+    }
+    let (w, h) = (frame.width() as usize, frame.height() as usize);
+    let margin_mm = (options.foreground_m * 1000.0) as i32;
+    // Gather the foreground, growing the stride until it fits the scratch.
+    let mut stride = 1usize;
+    let n = 'gather: loop {
+        let mut n = 0usize;
+        for v in (0..h).step_by(stride) {
+            for u in (0..w).step_by(stride) {
+                let i = v * w + u;
+                let (d, b) = (depth[i], background[i]);
+                if d == 0 || b == 0 || (b as i32 - d as i32) < margin_mm {
+                    continue;
+                }
+                let p = k.unproject(u as f32, v as f32, d as f32 * 0.001);
+                let hgt = up.signed_distance(&p);
+                if hgt < options.min_height_m || hgt > options.max_height_m {
+                    continue;
+                }
+                if n == N {
+                    stride += 1;
+                    continue 'gather;
+                }
+                scratch.points[n] = p;
+                n += 1;
+            }
+        }
+        break n;
+    };
+    let points = &mut scratch.points[..n];
+    points.sort_unstable_by(|a, b| up.signed_distance(a).total_cmp(&up.signed_distance(b)));
+    // Components in rising height: a point joins the component of the nearest lower neighbour within reach
+    // (lower points lie in the height band just below it, found from the sorted order), else starts its own.
+    let reach = options.neighbour_m * stride as f32;
+    let reach2 = reach * reach;
+    let mut components = 0usize;
+    let mut band_start = 0usize;
+    for i in 0..n {
+        let p = scratch.points[i];
+        let hi = up.signed_distance(&p);
+        while up.signed_distance(&scratch.points[band_start]) < hi - reach {
+            band_start += 1;
+        }
+        let mut best: Option<(f32, u16)> = None;
+        for j in band_start..i {
+            let d2 = (scratch.points[j] - p).norm_squared();
+            if d2 <= reach2 && best.is_none_or(|(b, _)| d2 < b) {
+                best = Some((d2, scratch.component[j]));
+            }
+        }
+        let c = match best {
+            Some((_, c)) => c as usize,
+            None => {
+                let c = components;
+                components += 1;
+                scratch.size[c] = 0;
+                scratch.low[c] = i as u16;
+                c
+            }
+        };
+        scratch.component[i] = c as u16;
+        scratch.size[c] += 1;
+        // The representative point: the (min_support / 4)-th lowest of the component, so a stray pixel just below
+        // the probe does not set its height.
+        if scratch.size[c] == (options.min_support / 4).max(1) {
+            scratch.low[c] = i as u16;
+        }
+    }
+    // Candidates: components with enough points, lowest first (their representative points are in rising order
+    // only roughly, so sort what is kept).
+    let mut m = 0usize;
+    for c in 0..components {
+        if scratch.size[c] < options.min_support {
+            continue;
+        }
+        let p = scratch.points[scratch.low[c] as usize];
+        let lp = LowPoint {
+            point: p,
+            height_m: up.signed_distance(&p),
+            support: scratch.size[c],
+        };
+        if m < out.len() {
+            out[m] = lp;
+            m += 1;
+        } else if let Some(worst) = (0..m).max_by(|&a, &b| out[a].height_m.total_cmp(&out[b].height_m))
+            && out[worst].height_m > lp.height_m
+        {
+            out[worst] = lp;
+        }
+    }
+    out[..m].sort_unstable_by(|a, b| a.height_m.total_cmp(&b.height_m));
+    m
+}
+
+/// How far the probe tip lies above the lowest corner of the probe head, metres, for a probe held at
+/// `robot_base_from_probe` in a base whose z is up: the head is the box `|x| <= hx, |y| <= hy`, from the tip back
+/// `head_length_m` along probe z.
+pub fn tip_above_lowest_corner(robot_base_from_probe: &UnitQuaternion, shape: &ProbeShape) -> f32 {
+    let [hx, hy] = shape.head_half_xy_m;
+    let mut lowest = 0.0f32;
+    for sx in [-hx, hx] {
+        for sy in [-hy, hy] {
+            for sz in [0.0, -shape.head_length_m] {
+                lowest = lowest.min((robot_base_from_probe * Vector3::new(sx, sy, sz)).z);
+            }
+        }
+    }
+    -lowest
+}
+
+/// A candidate tip of one pose, its height corrected to the tip's (see [`tip_above_lowest_corner`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Candidate {
+    /// Index of the pose it belongs to.
+    pub pose: usize,
+    /// The estimated tip, `camera` frame, metres.
+    pub tip_camera: Point3,
+    /// The estimated tip's height above the plane, metres.
+    pub tip_height_m: f32,
+}
+
+impl Candidate {
+    /// The candidate for `low` of pose `pose`, the arm holding the probe at `robot_base_from_probe`.
+    pub fn new(
+        pose: usize,
+        low: &LowPoint,
+        up: &Plane,
+        robot_base_from_probe: &UnitQuaternion,
+        shape: &ProbeShape,
+    ) -> Candidate {
+        let lift = tip_above_lowest_corner(robot_base_from_probe, shape);
+        Candidate {
+            pose,
+            tip_camera: low.point + up.normal() * lift,
+            tip_height_m: low.height_m + lift,
+        }
+    }
+}
+
+/// Pick the tip among the candidates of each pose: the offset between the arm's tip height
+/// (`robot_tip_z[pose]`, `robot_base` z) and the candidate's height above the plane that the most poses share
+/// (within `tolerance_m`; ties go to the tighter agreement), then per pose the candidate nearest that offset within
+/// the tolerance. Writes the chosen candidate's index (into `candidates`) per pose into `chosen`; returns how many
+/// poses have one (0 when nothing agrees, or `chosen` is shorter than `robot_tip_z`).
+pub fn choose_tips(
+    candidates: &[Candidate],
+    robot_tip_z: &[f32],
+    tolerance_m: f32,
+    chosen: &mut [Option<usize>],
+) -> usize {
+    let poses = robot_tip_z.len();
+    if chosen.len() < poses {
+        return 0;
+    }
+    chosen[..poses].fill(None);
+    let offset = |c: &Candidate| robot_tip_z.get(c.pose).map(|z| z - c.tip_height_m);
+    // Score an offset: poses with a candidate within tolerance, and their summed deviation.
+    let score = |o: f32| {
+        let (mut count, mut dev) = (0usize, 0.0f32);
+        for p in 0..poses {
+            let best = candidates
+                .iter()
+                .filter(|c| c.pose == p)
+                .filter_map(|c| offset(c).map(|x| libm::fabsf(x - o)))
+                .fold(f32::INFINITY, f32::min);
+            if best <= tolerance_m {
+                count += 1;
+                dev += best;
+            }
+        }
+        (count, dev)
+    };
+    let mut best: Option<(f32, usize, f32)> = None;
+    for c in candidates {
+        let Some(o) = offset(c) else { continue };
+        let (count, dev) = score(o);
+        if best.is_none_or(|(_, n, d)| count > n || (count == n && dev < d)) {
+            best = Some((o, count, dev));
+        }
+    }
+    let Some((o0, _, _)) = best else { return 0 };
+    // Re-centre on the mean offset of the agreeing poses' picks, then pick again.
+    let pick = |o: f32, chosen: &mut [Option<usize>]| {
+        let mut sum = 0.0f32;
+        let mut n = 0usize;
+        for (p, slot) in chosen.iter_mut().enumerate().take(poses) {
+            *slot = None;
+            let mut best_dev = tolerance_m;
+            for (i, c) in candidates.iter().enumerate() {
+                if c.pose != p {
+                    continue;
+                }
+                if let Some(x) = offset(c)
+                    && libm::fabsf(x - o) <= best_dev
+                {
+                    best_dev = libm::fabsf(x - o);
+                    *slot = Some(i);
+                }
+            }
+            if let Some(i) = *slot
+                && let Some(x) = offset(&candidates[i])
+            {
+                sum += x;
+                n += 1;
+            }
+        }
+        (n, if n > 0 { sum / n as f32 } else { o })
+    };
+    let (_, o1) = pick(o0, chosen);
+    pick(o1, chosen).0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::time::Timestamp;
+
+    const W: u16 = 160;
+    const H: u16 = 120;
+
+    fn k() -> Intrinsics {
+        Intrinsics {
+            fx: 150.0,
+            fy: 150.0,
+            cx: 80.0,
+            cy: 60.0,
+            width: W,
+            height: H,
+        }
+    }
+
+    /// A floor 2 m straight ahead (up = toward the camera), a 4 x 4 cm "probe" plate `tip_h` above it at (x, y),
+    /// and a second plate (an "elbow") 0.1 m above the floor when `elbow`.
+    fn scene(x: f32, y: f32, tip_h: f32, elbow: bool) -> [u16; W as usize * H as usize] {
+        let k = k();
+        let mut d = [0u16; W as usize * H as usize];
+        for v in 0..H as usize {
+            for u in 0..W as usize {
+                let ray = k.unproject(u as f32, v as f32, 1.0).coords;
+                let mut z = 2.0f32;
+                // The plate faces the camera `tip_h` above the floor (depth along the optical axis is height down).
+                let plate = 2.0 - tip_h;
+                let (px, py) = (ray.x * plate, ray.y * plate);
+                if (px - x).abs() < 0.02 && (py - y).abs() < 0.02 {
+                    z = plate;
+                }
+                if elbow {
+                    let e = 1.9f32;
+                    let (ex, ey) = (ray.x * e, ray.y * e);
+                    if (ex + 0.2).abs() < 0.03 && (ey + 0.1).abs() < 0.03 {
+                        z = e;
+                    }
+                }
+                d[v * W as usize + u] = (z * 1000.0) as u16;
+            }
+        }
+        d
+    }
+
+    #[test]
+    fn the_background_is_the_farthest_depth_and_the_floor_is_up() {
+        let a = scene(-0.2, 0.0, 0.3, false);
+        let b = scene(0.2, 0.1, 0.3, false);
+        let mut bg = [0u16; W as usize * H as usize];
+        for d in [&a, &b] {
+            let f = DepthFrame::new(d, W, H, Timestamp::from_us(0).unwrap(), 0).unwrap();
+            assert!(accumulate_background(&mut bg, &f));
+        }
+        assert!(bg.iter().all(|&v| v == 2000), "the bar never stays put");
+        let n = crate::planes::scratch_points(W as usize, H as usize, 6);
+        let (mut pts, mut labels) = ([Point3::origin(); 600], [0u8; 600]);
+        assert!(n <= 600);
+        let up = background_up(&bg, W, H, &k(), &mut pts, &mut labels).unwrap();
+        assert!((up.normal() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-3, "{up:?}");
+        assert!((up.signed_distance(&Point3::new(0.0, 0.0, 1.5)) - 0.5).abs() < 1e-3);
+    }
+
+    #[test]
+    fn the_lowest_foreground_points_are_found_and_the_vote_picks_the_tip() {
+        let up = Plane::through(Vector3::new(0.0, 0.0, 2.0), Vector3::new(0.0, 0.0, -1.0));
+        let bg = [2000u16; W as usize * H as usize];
+        let opts = StartOptions {
+            min_support: 4,
+            ..StartOptions::default()
+        };
+        let mut scratch = StartScratch::<4096>::new();
+        // Three poses at different heights, each with the elbow blob (0.1 m above the floor) lower than the tip.
+        let poses = [(-0.2f32, 0.1f32, 0.3f32), (0.15, -0.1, 0.45), (0.0, 0.2, 0.6)];
+        let mut candidates = [Candidate {
+            pose: 0,
+            tip_camera: Point3::origin(),
+            tip_height_m: 0.0,
+        }; 12];
+        let mut nc = 0;
+        let level = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI);
+        let lift = tip_above_lowest_corner(&level, &opts.shape);
+        assert!(lift.abs() < 1e-5, "pointing straight down: the end face is the lowest, {lift}");
+        for (i, &(x, y, h)) in poses.iter().enumerate() {
+            let d = scene(x, y, h, true);
+            let f = DepthFrame::new(&d, W, H, Timestamp::from_us(0).unwrap(), 0).unwrap();
+            let mut out = [LowPoint {
+                point: Point3::origin(),
+                height_m: 0.0,
+                support: 0,
+            }; 4];
+            let m = low_points(&f, &k(), &bg, &up, &opts, &mut scratch, &mut out);
+            assert_eq!(m, 2, "the bar and the elbow");
+            assert!((out[0].height_m - 0.1).abs() < 0.01, "the elbow is lowest: {:?}", out[0]);
+            assert!((out[1].height_m - h).abs() < 0.01, "{:?}", out[1]);
+            for lp in &out[..m] {
+                candidates[nc] = Candidate::new(i, lp, &up, &level, &opts.shape);
+                nc += 1;
+            }
+        }
+        // The arm's base 0.8 m below the floor: only the offset's constancy matters.
+        let robot_z: [f32; 3] = poses.map(|(_, _, h)| h + 0.8);
+        let mut chosen = [None; 3];
+        assert_eq!(choose_tips(&candidates[..nc], &robot_z, 0.03, &mut chosen), 3);
+        for (p, c) in chosen.iter().enumerate() {
+            let c = candidates[c.unwrap()];
+            assert!((c.tip_height_m - poses[p].2).abs() < 0.01, "pose {p}: {c:?}");
+        }
+        // Heights that agree with no candidate choose nothing.
+        assert_eq!(choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen), 1);
+    }
+}
