@@ -22,12 +22,15 @@
 //! background is one max per pixel per pose; the vote is quadratic in the candidates (a few hundred at most).
 //! Nothing allocates: the caller lends the background image and [`StartScratch`].
 
+use core::fmt;
+
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::geometry::{Plane, Point3, UnitQuaternion, Vector3};
 use crate::planes::{PlaneConfig, largest_plane};
 
-use super::solve::SolveOptions;
+use super::pairing::ArmSample;
+use super::solve::{Pair, Solution, SolveError, SolveOptions, solve};
 use super::tip::ProbeShape;
 
 /// Settings of the guess-free detection.
@@ -51,7 +54,7 @@ pub struct StartOptions {
 }
 
 impl Default for StartOptions {
-    /// 4 cm foreground margin, 5 cm–1.2 m above the plane, 2.5 cm neighbours, 12 points, 3 cm vote tolerance,
+    /// 4 cm foreground margin, 5 cm–1.2 m above the plane, 2.5 cm neighbours, 60 points, 3 cm vote tolerance,
     /// the synthetic probe.
     fn default() -> Self {
         StartOptions {
@@ -59,7 +62,7 @@ impl Default for StartOptions {
             min_height_m: 0.05,
             max_height_m: 1.2,
             neighbour_m: 0.025,
-            min_support: 12,
+            min_support: 60,
             vote_tolerance_m: 0.03,
             shape: ProbeShape::SYNTHETIC,
         }
@@ -88,6 +91,40 @@ pub fn accumulate_background(background: &mut [u16], frame: &DepthFrame<'_>) -> 
     }
     true
 }
+
+/// The background as the per-pixel median of the frames' depths (no depth left out; 0 where no frame has depth):
+/// the arm covers a pixel in a few of the poses at most, and unlike the farthest depth the median does not pick
+/// up the sensor's far outliers. At most [`MAX_POSES`] frames; false (nothing done) when sizes differ or there are
+/// more frames.
+pub fn median_background<'f>(background: &mut [u16], frames: usize, frame: impl Fn(usize) -> DepthFrame<'f>) -> bool {
+    if frames == 0 || frames > MAX_POSES || (0..frames).any(|i| frame(i).depth_mm().len() != background.len()) {
+        return false;
+    }
+    let mut values = [0u16; MAX_POSES];
+    for (p, b) in background.iter_mut().enumerate() {
+        let mut m = 0;
+        for i in 0..frames {
+            let d = frame(i).depth_mm()[p];
+            if d != 0 {
+                values[m] = d;
+                m += 1;
+            }
+        }
+        *b = if m == 0 {
+            0
+        } else {
+            let (_, v, _) = values[..m].select_nth_unstable(m / 2);
+            *v
+        };
+    }
+    true
+}
+
+/// Height of the band at a component's bottom whose centre locates the tip across the probe axis, metres.
+const END_BAND_M: f32 = 0.03;
+
+/// Most poses the guess-free start takes.
+pub const MAX_POSES: usize = 64;
 
 /// "Up" in the camera: the largest plane of the background (mattress or floor), normal toward the camera, height
 /// measured from it. `points` and `labels` are scratch of at least
@@ -123,8 +160,9 @@ pub fn background_up(
 /// A local lowest point of the foreground: a candidate for the probe tip.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct LowPoint {
-    /// The point, `camera` frame, metres (the `min_support / 4`-th lowest of its component, so that a stray
-    /// pixel below it does not decide).
+    /// The point, `camera` frame, metres: at the height of the `min_support / 4`-th lowest point of its
+    /// component (so that a stray pixel below it does not decide), below the centre of the component's lowest
+    /// 3 cm.
     pub point: Point3,
     /// Its height above the plane, metres.
     pub height_m: f32,
@@ -248,10 +286,22 @@ pub fn low_points<const N: usize>(
         if scratch.size[c] < options.min_support {
             continue;
         }
+        // Across the axis, the centre of the component's lowest 3 cm (the head's end) rather than its lowest
+        // point (a corner of the end face, or its rim); along up, the lowest point.
         let p = scratch.points[scratch.low[c] as usize];
+        let h_low = up.signed_distance(&p);
+        let (mut sum, mut cnt) = (Vector3::zeros(), 0u32);
+        for i in 0..n {
+            let q = scratch.points[i];
+            if scratch.component[i] as usize == c && up.signed_distance(&q) <= h_low + END_BAND_M {
+                sum += q.coords;
+                cnt += 1;
+            }
+        }
+        let centre = Point3::from(sum / cnt.max(1) as f32);
         let lp = LowPoint {
-            point: p,
-            height_m: up.signed_distance(&p),
+            point: centre - up.normal() * (up.signed_distance(&centre) - h_low),
+            height_m: h_low,
             support: scratch.size[c],
         };
         if m < out.len() {
@@ -383,6 +433,136 @@ pub fn choose_tips(
     };
     let (_, o1) = pick(o0, chosen);
     pick(o1, chosen).0
+}
+
+/// Why the guess-free start gave no extrinsic.
+#[derive(Debug, Clone, Copy, PartialEq)]
+#[non_exhaustive]
+pub enum StartError {
+    /// No plane (mattress or floor) in the background: "down" is unknown.
+    NoPlane,
+    /// Too few poses with a tip candidate that agrees with the arm's heights.
+    TooFewTips {
+        /// Poses with a chosen tip.
+        found: usize,
+        /// Poses given.
+        poses: usize,
+    },
+    /// The rough solve refused the pairs.
+    Solve(SolveError),
+    /// A buffer is shorter than the frames need, or the frames differ in size.
+    BufferTooShort,
+}
+
+impl fmt::Display for StartError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            StartError::NoPlane => f.write_str(
+                "no bed or floor plane in view: cannot tell down without an extrinsic guess (give --guess)",
+            ),
+            StartError::TooFewTips { found, poses } => write!(
+                f,
+                "no probe visible without a guess: a probe tip below the arm found in only {found} of {poses} poses                  (the bed must be empty or the patient still, the probe pointing down into free space; or give                  --guess)"
+            ),
+            StartError::Solve(e) => write!(f, "guess-free start: {e}"),
+            StartError::BufferTooShort => f.write_str("guess-free start: buffers shorter than the frames"),
+        }
+    }
+}
+
+impl core::error::Error for StartError {}
+
+/// Buffers of [`rough_extrinsic`], lent by the caller: `background` one entry per pixel, `plane_points` and
+/// `plane_labels` [`crate::planes::scratch_points`]`(width, height, 6)`, `candidates` room for
+/// `CANDIDATES_PER_POSE` per pose, `chosen`, `pairs`, `residuals` and `inliers` one per pose.
+#[derive(Debug)]
+pub struct StartBuffers<'a> {
+    /// Per-pixel background.
+    pub background: &'a mut [u16],
+    /// Plane search points.
+    pub plane_points: &'a mut [Point3],
+    /// Plane search labels.
+    pub plane_labels: &'a mut [u8],
+    /// Tip candidates.
+    pub candidates: &'a mut [Candidate],
+    /// Chosen candidate per pose.
+    pub chosen: &'a mut [Option<usize>],
+    /// Rough pairs.
+    pub pairs: &'a mut [Pair],
+    /// Residual per pair.
+    pub residuals: &'a mut [f32],
+    /// Inlier flag per pair.
+    pub inliers: &'a mut [bool],
+}
+
+/// Candidates kept per pose.
+pub const CANDIDATES_PER_POSE: usize = 8;
+
+/// The rough extrinsic from one still frame per pose (`frame(i)`, the arm state at it `arms[i]`) and no guess:
+/// background, up, candidates, the vote, then Kabsch in RANSAC with [`rough_solve_options`]. Returns the solution
+/// and how many poses gave a tip.
+pub fn rough_extrinsic<'f, const N: usize>(
+    frame: impl Fn(usize) -> DepthFrame<'f>,
+    arms: &[ArmSample],
+    k: &Intrinsics,
+    options: &StartOptions,
+    scratch: &mut StartScratch<N>,
+    buffers: StartBuffers<'_>,
+) -> Result<(Solution, usize), StartError> {
+    let poses = arms.len();
+    let b = buffers;
+    if b.candidates.len() < poses * CANDIDATES_PER_POSE
+        || b.chosen.len() < poses
+        || b.pairs.len() < poses
+        || b.residuals.len() < poses
+        || b.inliers.len() < poses
+    {
+        return Err(StartError::BufferTooShort);
+    }
+    if poses == 0 {
+        return Err(StartError::TooFewTips { found: 0, poses });
+    }
+    let (w, h) = (frame(0).width(), frame(0).height());
+    if (0..poses).any(|i| frame(i).width() != w || frame(i).height() != h)
+        || !median_background(b.background, poses, &frame)
+    {
+        return Err(StartError::BufferTooShort);
+    }
+    let up = background_up(b.background, w, h, k, b.plane_points, b.plane_labels).ok_or(StartError::NoPlane)?;
+    let mut nc = 0usize;
+    let mut robot_z = [0.0f32; MAX_POSES];
+    if poses > robot_z.len() {
+        return Err(StartError::BufferTooShort);
+    }
+    for (i, arm) in arms.iter().enumerate() {
+        robot_z[i] = arm.tip_robot_base.z;
+        let mut low = [LowPoint {
+            point: Point3::origin(),
+            height_m: 0.0,
+            support: 0,
+        }; CANDIDATES_PER_POSE];
+        let m = low_points(&frame(i), k, b.background, &up, options, scratch, &mut low);
+        for lp in &low[..m] {
+            b.candidates[nc] = Candidate::new(i, lp, &up, &arm.robot_base_from_probe, &options.shape);
+            nc += 1;
+        }
+    }
+    let found = choose_tips(&b.candidates[..nc], &robot_z[..poses], options.vote_tolerance_m, b.chosen);
+    let mut np = 0usize;
+    for (i, c) in b.chosen[..poses].iter().enumerate() {
+        if let Some(c) = c {
+            b.pairs[np] = Pair {
+                robot_base: arms[i].tip_robot_base,
+                camera: b.candidates[*c].tip_camera,
+            };
+            np += 1;
+        }
+    }
+    if np < 4 {
+        return Err(StartError::TooFewTips { found, poses });
+    }
+    let s = solve(&b.pairs[..np], &rough_solve_options(), b.residuals, b.inliers).map_err(StartError::Solve)?;
+    Ok((s, found))
 }
 
 #[cfg(test)]
