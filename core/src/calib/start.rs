@@ -13,6 +13,9 @@
 //! (the base stands level, `robot_base` z up), so the offset most poses agree on picks one candidate per pose
 //! (elbow, forearm and arm parts cut by the image border give offsets that agree with nothing).
 //!
+//! A rough solution must map the plane's up onto the base's up within 10°; one that does not came from a
+//! consensus of wrong candidates and is refused.
+//!
 //! Accuracy: the lowest seen point is a corner of the head's end face, up to ~1.5 cm across the axis from the tip
 //! (its height is corrected from the arm's orientation, its sideways offset is not known before the extrinsic),
 //! so the rough solve takes a 4 cm inlier threshold ([`rough_solve_options`]) and its result a 6 cm prior.
@@ -366,16 +369,17 @@ impl Candidate {
 /// (`robot_tip_z[pose]`, `robot_base` z) and the candidate's height above the plane that the most poses share
 /// (within `tolerance_m`; ties go to the tighter agreement), then per pose the candidate nearest that offset within
 /// the tolerance. Writes the chosen candidate's index (into `candidates`) per pose into `chosen`; returns how many
-/// poses have one (0 when nothing agrees, or `chosen` is shorter than `robot_tip_z`).
+/// poses have one (0 when nothing agrees, or `chosen` is shorter than `robot_tip_z`) and the offset (arm height
+/// minus tip height above the plane, metres).
 pub fn choose_tips(
     candidates: &[Candidate],
     robot_tip_z: &[f32],
     tolerance_m: f32,
     chosen: &mut [Option<usize>],
-) -> usize {
+) -> (usize, f32) {
     let poses = robot_tip_z.len();
     if chosen.len() < poses {
-        return 0;
+        return (0, 0.0);
     }
     chosen[..poses].fill(None);
     let offset = |c: &Candidate| robot_tip_z.get(c.pose).map(|z| z - c.tip_height_m);
@@ -403,7 +407,9 @@ pub fn choose_tips(
             best = Some((o, count, dev));
         }
     }
-    let Some((o0, _, _)) = best else { return 0 };
+    let Some((o0, _, _)) = best else {
+        return (0, 0.0);
+    };
     // Re-centre on the mean offset of the agreeing poses' picks, then pick again.
     let pick = |o: f32, chosen: &mut [Option<usize>]| {
         let mut sum = 0.0f32;
@@ -432,7 +438,7 @@ pub fn choose_tips(
         (n, if n > 0 { sum / n as f32 } else { o })
     };
     let (_, o1) = pick(o0, chosen);
-    pick(o1, chosen).0
+    (pick(o1, chosen).0, o1)
 }
 
 /// Why the guess-free start gave no extrinsic.
@@ -450,6 +456,9 @@ pub enum StartError {
     },
     /// The rough solve refused the pairs.
     Solve(SolveError),
+    /// The pairs agree on a transform that does not map the bed's up onto the base's up: the candidates taken
+    /// for the tip are not the tip (or the base does not stand level).
+    NotLevel,
     /// A buffer is shorter than the frames need, or the frames differ in size.
     BufferTooShort,
 }
@@ -465,6 +474,10 @@ impl fmt::Display for StartError {
                 "no probe visible without a guess: a probe tip below the arm found in only {found} of {poses} poses                  (the bed must be empty or the patient still, the probe pointing down into free space; or give                  --guess)"
             ),
             StartError::Solve(e) => write!(f, "guess-free start: {e}"),
+            StartError::NotLevel => f.write_str(
+                "guess-free start: the tips found agree only on a transform that tilts the bed more than 10° from \
+                 the arm's base: they are not the probe (or the base does not stand level); give --guess",
+            ),
             StartError::BufferTooShort => f.write_str("guess-free start: buffers shorter than the frames"),
         }
     }
@@ -473,8 +486,8 @@ impl fmt::Display for StartError {
 impl core::error::Error for StartError {}
 
 /// Buffers of [`rough_extrinsic`], lent by the caller: `background` one entry per pixel, `plane_points` and
-/// `plane_labels` [`crate::planes::scratch_points`]`(width, height, 6)`, `candidates` room for
-/// `CANDIDATES_PER_POSE` per pose, `chosen`, `pairs`, `residuals` and `inliers` one per pose.
+/// `plane_labels` [`crate::planes::scratch_points`]`(width, height, 6)`, `candidates`, `pairs`, `residuals` and
+/// `inliers` room for [`CANDIDATES_PER_POSE`] per pose, `chosen` one per pose.
 #[derive(Debug)]
 pub struct StartBuffers<'a> {
     /// Per-pixel background.
@@ -513,9 +526,9 @@ pub fn rough_extrinsic<'f, const N: usize>(
     let b = buffers;
     if b.candidates.len() < poses * CANDIDATES_PER_POSE
         || b.chosen.len() < poses
-        || b.pairs.len() < poses
-        || b.residuals.len() < poses
-        || b.inliers.len() < poses
+        || b.pairs.len() < poses * CANDIDATES_PER_POSE
+        || b.residuals.len() < poses * CANDIDATES_PER_POSE
+        || b.inliers.len() < poses * CANDIDATES_PER_POSE
     {
         return Err(StartError::BufferTooShort);
     }
@@ -547,7 +560,10 @@ pub fn rough_extrinsic<'f, const N: usize>(
             nc += 1;
         }
     }
-    let found = choose_tips(&b.candidates[..nc], &robot_z[..poses], options.vote_tolerance_m, b.chosen);
+    let (found, offset) = choose_tips(&b.candidates[..nc], &robot_z[..poses], options.vote_tolerance_m, b.chosen);
+    // First the chosen candidate of each pose; when those agree on no transform (the nearest in height is not
+    // always the tip: a wrist or forearm part may sit at a similar height), every candidate whose height agrees,
+    // for the solver's RANSAC to sort out.
     let mut np = 0usize;
     for (i, c) in b.chosen[..poses].iter().enumerate() {
         if let Some(c) = c {
@@ -561,7 +577,31 @@ pub fn rough_extrinsic<'f, const N: usize>(
     if np < 4 {
         return Err(StartError::TooFewTips { found, poses });
     }
+    // A solution must also map the plane's up onto the base's up (within 10°): a consensus of wrong candidates
+    // rarely does.
+    let level = |s: &Solution| (s.robot_base_from_camera.rotation * up.normal()).z >= libm::cosf(0.1745);
+    let first = solve(&b.pairs[..np], &rough_solve_options(), b.residuals, b.inliers);
+    if let Ok(s) = first
+        && level(&s)
+    {
+        return Ok((s, found));
+    }
+    np = 0;
+    for c in &b.candidates[..nc] {
+        if np < b.pairs.len()
+            && libm::fabsf(robot_z[c.pose] - c.tip_height_m - offset) <= options.vote_tolerance_m
+        {
+            b.pairs[np] = Pair {
+                robot_base: arms[c.pose].tip_robot_base,
+                camera: c.tip_camera,
+            };
+            np += 1;
+        }
+    }
     let s = solve(&b.pairs[..np], &rough_solve_options(), b.residuals, b.inliers).map_err(StartError::Solve)?;
+    if !level(&s) {
+        return Err(StartError::NotLevel);
+    }
     Ok((s, found))
 }
 
@@ -670,12 +710,14 @@ mod tests {
         // The arm's base 0.8 m below the floor: only the offset's constancy matters.
         let robot_z: [f32; 3] = poses.map(|(_, _, h)| h + 0.8);
         let mut chosen = [None; 3];
-        assert_eq!(choose_tips(&candidates[..nc], &robot_z, 0.03, &mut chosen), 3);
+        let (found, offset) = choose_tips(&candidates[..nc], &robot_z, 0.03, &mut chosen);
+        assert_eq!(found, 3);
+        assert!((offset - 0.8).abs() < 0.01, "{offset}");
         for (p, c) in chosen.iter().enumerate() {
             let c = candidates[c.unwrap()];
             assert!((c.tip_height_m - poses[p].2).abs() < 0.01, "pose {p}: {c:?}");
         }
         // Heights that agree with no candidate choose nothing.
-        assert_eq!(choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen), 1);
+        assert_eq!(choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen).0, 1);
     }
 }

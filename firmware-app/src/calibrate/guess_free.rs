@@ -204,8 +204,11 @@ pub fn collect(
             robot_base: Point3::origin(),
             camera: Point3::origin(),
         };
-        let mut pairs = vec![blank_pair; n];
-        let (mut residuals, mut inliers) = (vec![0.0; n], vec![false; n]);
+        let mut pairs = vec![blank_pair; n * CANDIDATES_PER_POSE];
+        let (mut residuals, mut inliers) = (
+            vec![0.0; n * CANDIDATES_PER_POSE],
+            vec![false; n * CANDIDATES_PER_POSE],
+        );
         let mut scratch: Box<StartScratch<16384>> = Box::default();
         let arm_at: Vec<ArmSample> = first
             .iter()

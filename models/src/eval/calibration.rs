@@ -154,9 +154,12 @@ pub fn guess_free_start(
             robot_base: Point3::origin(),
             camera: Point3::origin()
         };
-        n
+        n * supine_core::calib::start::CANDIDATES_PER_POSE
     ];
-    let (mut residuals, mut inliers) = (vec![0.0; n], vec![false; n]);
+    let (mut residuals, mut inliers) = (
+        vec![0.0; n * supine_core::calib::start::CANDIDATES_PER_POSE],
+        vec![false; n * supine_core::calib::start::CANDIDATES_PER_POSE],
+    );
     let mut scratch: Box<StartScratch<16384>> = Box::default();
     let frame = |i: usize| {
         DepthFrame::new(&frames[i], w, h, Timestamp::default(), i as u32).expect("keyframes have the frame size")
@@ -181,30 +184,6 @@ pub fn guess_free_start(
             inliers: &mut inliers,
         },
     )
-}
-
-fn debug_start(frames: &[Vec<u16>], arms: &[ArmSample], k: &Intrinsics, truth: &Isometry3) {
-    use supine_core::calib::start::*;
-    let (w, h) = (k.width, k.height);
-    let mut bg = vec![0u16; w as usize * h as usize];
-    median_background(&mut bg, frames.len(), |i| DepthFrame::new(&frames[i], w, h, Timestamp::default(), 0).unwrap());
-    let np = supine_core::planes::scratch_points(w as usize, h as usize, 6);
-    let (mut pp, mut pl) = (vec![Point3::origin(); np], vec![0u8; np]);
-    let up = background_up(&bg, w, h, k, &mut pp, &mut pl).unwrap();
-    let true_up = truth.inverse().rotation * nalgebra::Vector3::z();
-    eprintln!("up {:?} true {:?}", up.normal(), true_up);
-    let mut scratch: Box<StartScratch<16384>> = Box::default();
-    for (i, a) in arms.iter().enumerate() {
-        let f = DepthFrame::new(&frames[i], w, h, Timestamp::default(), 0).unwrap();
-        let tip = truth.inverse() * a.tip_robot_base;
-        let mut low = [LowPoint { point: Point3::origin(), height_m: 0.0, support: 0 }; 8];
-        let m = low_points(&f, k, &bg, &up, &StartOptions::default(), &mut scratch, &mut low);
-        let c: Vec<String> = low[..m].iter().map(|l| {
-            let c = Candidate::new(i, l, &up, &a.robot_base_from_probe, &StartOptions::default().shape);
-            format!("[{:.0}mm h{:.3} off{:.3} n{}]", (c.tip_camera - tip).norm()*1000.0, c.tip_height_m, a.tip_robot_base.z - c.tip_height_m, l.support)
-        }).collect();
-        eprintln!("pose {i}: true h {:.3} z {:.3} cands {}", up.signed_distance(&tip), a.tip_robot_base.z, c.join(" "));
-    }
 }
 
 fn reader_intrinsics(_reader: &OniReader) -> Intrinsics {
@@ -263,6 +242,13 @@ pub struct Outcome {
     pub start_translation_error_mm: Option<f32>,
     /// Rotation error of the rough extrinsic, degrees.
     pub start_rotation_error_deg: Option<f32>,
+    /// Mean distance of the detected tips (dwell means) from the true tips mapped into the camera, mm: what the
+    /// detector and the dwell averaging leave.
+    pub tip_detection_error_mm: Option<f32>,
+    /// Mean signed error of the detected tips along the camera's view ray, mm (positive: seen too far).
+    pub tip_depth_bias_mm: Option<f32>,
+    /// Mean distance of the arm's reported tips (dwell means) from the true tips, mm: encoder and kinematic error.
+    pub arm_tip_error_mm: Option<f32>,
     /// Frame counters of the second pass.
     pub frames_still: u32,
     /// Frames without a tip.
@@ -309,6 +295,9 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
             start_tips: None,
             start_translation_error_mm: None,
             start_rotation_error_deg: None,
+            tip_detection_error_mm: None,
+            tip_depth_bias_mm: None,
+            arm_tip_error_mm: None,
             frames_still: 0,
             frames_no_tip: 0,
         };
@@ -318,9 +307,6 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
             None => nominal,
             Some((frames, arms)) => {
                 let m = n.min(arms.len());
-                if std::env::var_os("DEBUG_START").is_some() && n == 20 {
-                    debug_start(&frames[..m], &arms[..m], &k, &truth);
-                }
                 match guess_free_start(&frames[..m], &arms[..m], &k) {
                     Ok((s, tips)) => {
                         o.start_tips = Some(tips);
@@ -360,6 +346,10 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
             out.push(o);
             continue;
         }
+        let (det, bias, arm_err) = tip_errors(&second[..n], &cal.poses_robot_base, &truth);
+        o.tip_detection_error_mm = det;
+        o.tip_depth_bias_mm = bias;
+        o.arm_tip_error_mm = arm_err;
         let sol = solve_poses(&second[..n], false);
         match sol {
             Ok(s) => {
@@ -376,6 +366,36 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
         out.push(o);
     }
     Ok(out)
+}
+
+/// Where the pair errors come from: each pose matched to the nearest true pose tip (within 2 cm); the mean
+/// detection error, its mean component along the view ray, and the mean arm error, mm.
+fn tip_errors(
+    poses: &[PoseObservation],
+    true_tips: &[[f32; 3]],
+    truth: &Isometry3,
+) -> (Option<f32>, Option<f32>, Option<f32>) {
+    let camera_from_robot_base = truth.inverse();
+    let (mut det, mut bias, mut arm) = (Vec::new(), Vec::new(), Vec::new());
+    for p in poses {
+        let nearest = true_tips
+            .iter()
+            .map(|t| Point3::from(*t))
+            .min_by(|a, b| (a - p.robot_base).norm().total_cmp(&(b - p.robot_base).norm()));
+        let Some(t) = nearest.filter(|t| (t - p.robot_base).norm() < 0.02) else {
+            continue;
+        };
+        let tc = camera_from_robot_base * t;
+        let e = p.camera - tc;
+        det.push(e.norm() * 1000.0);
+        bias.push(e.dot(&tc.coords.normalize()) * 1000.0);
+        arm.push((p.robot_base - t).norm() * 1000.0);
+    }
+    (
+        mean(det.into_iter()),
+        mean(bias.into_iter()),
+        mean(arm.into_iter()),
+    )
 }
 
 fn torso_error_mm(est: &Isometry3, truth: &Isometry3, points: &[[f32; 3]]) -> f32 {
@@ -433,6 +453,11 @@ pub fn summarise(outcomes: &[&Outcome]) -> serde_json::Value {
                 "residual_mm": mean(f(|o| o.residual_mm)),
                 "torso_mapping_error_mm": mean(f(|o| o.torso_mapping_error_mm)),
                 "translation_error_mm_max": max(f(|o| o.translation_error_mm)),
+                "tip_detection_error_mm": mean(f(|o| o.tip_detection_error_mm)),
+                "tip_depth_bias_mm": mean(f(|o| o.tip_depth_bias_mm)),
+                "arm_tip_error_mm": mean(f(|o| o.arm_tip_error_mm)),
+                "start_translation_error_mm": mean(f(|o| o.start_translation_error_mm)),
+                "start_rotation_error_deg": mean(f(|o| o.start_rotation_error_deg)),
                 "rotation_error_deg_max": max(f(|o| o.rotation_error_deg)),
                 "sequences": at.len(),
                 "solved": solved.len(),
