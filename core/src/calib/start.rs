@@ -13,8 +13,9 @@
 //! (the base stands level, `robot_base` z up), so the offset most poses agree on picks one candidate per pose
 //! (elbow, forearm and arm parts cut by the image border give offsets that agree with nothing).
 //!
-//! A rough solution must map the plane's up onto the base's up within 10°; one that does not came from a
-//! consensus of wrong candidates and is refused.
+//! The rough solve uses "up" on both sides too: the camera is turned so that the plane's up is the base's z, and
+//! only yaw and translation are fitted (two pairs fix them), in RANSAC over pairs of candidates from different
+//! poses, each pose scoring with its best candidate.
 //!
 //! Accuracy: the lowest seen point is a corner of the head's end face, up to ~1.5 cm across the axis from the tip
 //! (its height is corrected from the arm's orientation, its sideways offset is not known before the extrinsic),
@@ -29,11 +30,11 @@ use core::fmt;
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
-use crate::geometry::{Plane, Point3, UnitQuaternion, Vector3};
+use crate::geometry::{Isometry3, Plane, Point3, Translation3, UnitQuaternion, Vector3};
 use crate::planes::{PlaneConfig, largest_plane};
 
 use super::pairing::ArmSample;
-use super::solve::{Pair, Solution, SolveError, SolveOptions, solve};
+use super::solve::{Pair, Solution, SolveError, SolveOptions, condition_number};
 use super::tip::ProbeShape;
 
 /// Settings of the guess-free detection.
@@ -456,9 +457,6 @@ pub enum StartError {
     },
     /// The rough solve refused the pairs.
     Solve(SolveError),
-    /// The pairs agree on a transform that does not map the bed's up onto the base's up: the candidates taken
-    /// for the tip are not the tip (or the base does not stand level).
-    NotLevel,
     /// A buffer is shorter than the frames need, or the frames differ in size.
     BufferTooShort,
 }
@@ -474,10 +472,6 @@ impl fmt::Display for StartError {
                 "no probe visible without a guess: a probe tip below the arm found in only {found} of {poses} poses                  (the bed must be empty or the patient still, the probe pointing down into free space; or give                  --guess)"
             ),
             StartError::Solve(e) => write!(f, "guess-free start: {e}"),
-            StartError::NotLevel => f.write_str(
-                "guess-free start: the tips found agree only on a transform that tilts the bed more than 10° from \
-                 the arm's base: they are not the probe (or the base does not stand level); give --guess",
-            ),
             StartError::BufferTooShort => f.write_str("guess-free start: buffers shorter than the frames"),
         }
     }
@@ -561,48 +555,186 @@ pub fn rough_extrinsic<'f, const N: usize>(
         }
     }
     let (found, offset) = choose_tips(&b.candidates[..nc], &robot_z[..poses], options.vote_tolerance_m, b.chosen);
-    // First the chosen candidate of each pose; when those agree on no transform (the nearest in height is not
-    // always the tip: a wrist or forearm part may sit at a similar height), every candidate whose height agrees,
-    // for the solver's RANSAC to sort out.
-    let mut np = 0usize;
-    for (i, c) in b.chosen[..poses].iter().enumerate() {
-        if let Some(c) = c {
-            b.pairs[np] = Pair {
-                robot_base: arms[i].tip_robot_base,
-                camera: b.candidates[*c].tip_camera,
-            };
-            np += 1;
-        }
-    }
-    if np < 4 {
+    if found < 4 {
         return Err(StartError::TooFewTips { found, poses });
     }
-    // A solution must also map the plane's up onto the base's up (within 10°): a consensus of wrong candidates
-    // rarely does.
-    let level = |s: &Solution| (s.robot_base_from_camera.rotation * up.normal()).z >= libm::cosf(0.1745);
-    let first = solve(&b.pairs[..np], &rough_solve_options(), b.residuals, b.inliers);
-    if let Ok(s) = first
-        && level(&s)
-    {
-        return Ok((s, found));
-    }
-    np = 0;
+    // Every candidate whose height agrees is a pair (the nearest in height is not always the tip: a wrist or
+    // forearm part may sit at a similar height); the levelled RANSAC below sorts them out.
+    let mut pose_of = [0u8; MAX_POSES * CANDIDATES_PER_POSE];
+    let mut np = 0usize;
     for c in &b.candidates[..nc] {
         if np < b.pairs.len()
+            && np < pose_of.len()
             && libm::fabsf(robot_z[c.pose] - c.tip_height_m - offset) <= options.vote_tolerance_m
         {
             b.pairs[np] = Pair {
                 robot_base: arms[c.pose].tip_robot_base,
                 camera: c.tip_camera,
             };
+            pose_of[np] = c.pose as u8;
             np += 1;
         }
     }
-    let s = solve(&b.pairs[..np], &rough_solve_options(), b.residuals, b.inliers).map_err(StartError::Solve)?;
-    if !level(&s) {
-        return Err(StartError::NotLevel);
-    }
+    let s = level_solve(
+        &b.pairs[..np],
+        &pose_of[..np],
+        poses,
+        &up,
+        &rough_solve_options(),
+        b.residuals,
+        b.inliers,
+    )?;
     Ok((s, found))
+}
+
+/// The rough solve with up known on both sides: the camera is first turned so that the plane's up is the base's
+/// z, leaving yaw and translation (4 degrees of freedom) to fit, which two pairs fix. RANSAC over all pairs of
+/// pairs from different poses (each pose scores with its best candidate), then three rounds of least squares
+/// over the inlier poses' best candidates. Writes each pair's residual and whether it was used.
+fn level_solve(
+    pairs: &[Pair],
+    pose_of: &[u8],
+    poses: usize,
+    up: &Plane,
+    options: &SolveOptions,
+    residuals: &mut [f32],
+    used: &mut [bool],
+) -> Result<Solution, StartError> {
+    let n = pairs.len();
+    if residuals.len() < n || used.len() < n {
+        return Err(StartError::BufferTooShort);
+    }
+    let level = UnitQuaternion::rotation_between(&up.normal(), &Vector3::z()).unwrap_or_else(|| {
+        // Up pointing straight down the base's -z: a half turn about x.
+        UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI)
+    });
+    let thr = options.inlier_threshold_m;
+    // Yaw and translation from the pairs `use_pair` selects (least squares in the horizontal plane).
+    let fit = |use_pair: &dyn Fn(usize) -> bool| -> Option<Isometry3> {
+        let (mut cq, mut cr, mut m) = (Vector3::zeros(), Vector3::zeros(), 0.0f32);
+        for (i, p) in pairs.iter().enumerate() {
+            if use_pair(i) {
+                cq += (level * p.camera).coords;
+                cr += p.robot_base.coords;
+                m += 1.0;
+            }
+        }
+        if m < 2.0 {
+            return None;
+        }
+        cq /= m;
+        cr /= m;
+        let (mut sxx, mut sxy) = (0.0f32, 0.0f32);
+        for (i, p) in pairs.iter().enumerate() {
+            if use_pair(i) {
+                let q = (level * p.camera).coords - cq;
+                let r = p.robot_base.coords - cr;
+                sxx += q.x * r.x + q.y * r.y;
+                sxy += q.x * r.y - q.y * r.x;
+            }
+        }
+        if sxx == 0.0 && sxy == 0.0 {
+            return None;
+        }
+        let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), libm::atan2f(sxy, sxx));
+        let rotation = yaw * level;
+        let t = cr - rotation * (cq_camera(&level, &cq));
+        Some(Isometry3::from_parts(Translation3::from(t), rotation))
+    };
+    // Per pose, the best candidate's residual under `t`; the count of poses within the threshold and the
+    // truncated cost.
+    let score = |t: &Isometry3, best: &mut [Option<(usize, f32)>; MAX_POSES]| {
+        best[..poses].fill(None);
+        for (i, p) in pairs.iter().enumerate() {
+            let r = (p.robot_base - t * p.camera).norm();
+            let slot = &mut best[pose_of[i] as usize];
+            if slot.is_none_or(|(_, b)| r < b) {
+                *slot = Some((i, r));
+            }
+        }
+        let (mut count, mut cost) = (0usize, 0.0f32);
+        for b in best[..poses].iter().flatten() {
+            if b.1 < thr {
+                count += 1;
+                cost += b.1 * b.1;
+            } else {
+                cost += thr * thr;
+            }
+        }
+        (count, cost)
+    };
+    let mut best_slots = [None; MAX_POSES];
+    let mut best: Option<(Isometry3, usize, f32)> = None;
+    for a in 0..n {
+        for c in a + 1..n {
+            if pose_of[a] == pose_of[c] {
+                continue;
+            }
+            let Some(t) = fit(&|i| i == a || i == c) else { continue };
+            let (count, cost) = score(&t, &mut best_slots);
+            if best.is_none_or(|(_, k, e)| count > k || (count == k && cost < e)) {
+                best = Some((t, count, cost));
+            }
+        }
+    }
+    let Some((mut t, _, _)) = best else {
+        return Err(StartError::Solve(SolveError::TooFewInliers {
+            inliers: 0,
+            needed: options.min_pairs,
+        }));
+    };
+    for _ in 0..3 {
+        score(&t, &mut best_slots);
+        let chosen = best_slots;
+        let take = |i: usize| chosen[pose_of[i] as usize].is_some_and(|(j, r)| j == i && r < thr);
+        if let Some(next) = fit(&take) {
+            t = next;
+        }
+    }
+    score(&t, &mut best_slots);
+    let (mut count, mut sq, mut max_r) = (0usize, 0.0f32, 0.0f32);
+    for (i, p) in pairs.iter().enumerate() {
+        residuals[i] = (p.robot_base - t * p.camera).norm();
+        used[i] = best_slots[pose_of[i] as usize].is_some_and(|(j, r)| j == i && r < thr);
+        if used[i] {
+            count += 1;
+            sq += residuals[i] * residuals[i];
+            max_r = max_r.max(residuals[i]);
+        }
+    }
+    let needed = options.min_pairs.max(3);
+    if count < needed {
+        return Err(StartError::Solve(SolveError::TooFewInliers {
+            inliers: count,
+            needed,
+        }));
+    }
+    let condition = condition_number(
+        pairs
+            .iter()
+            .zip(used.iter())
+            .filter(|(_, u)| **u)
+            .map(|(p, _)| p.robot_base),
+    )
+    .unwrap_or(f32::INFINITY);
+    if condition > options.max_condition {
+        return Err(StartError::Solve(SolveError::Coplanar {
+            condition,
+            limit: options.max_condition,
+        }));
+    }
+    Ok(Solution {
+        robot_base_from_camera: t,
+        inliers: count,
+        rms_residual_m: libm::sqrtf(sq / count as f32),
+        max_residual_m: max_r,
+        condition,
+    })
+}
+
+/// The camera-frame point whose levelled image is `levelled` (the inverse of the levelling turn).
+fn cq_camera(level: &UnitQuaternion, levelled: &Vector3) -> Vector3 {
+    level.inverse() * levelled
 }
 
 #[cfg(test)]
