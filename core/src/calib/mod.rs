@@ -24,9 +24,7 @@ pub mod tip;
 pub use pairing::{ArmHistory, ArmSample, DwellCollector, Match, PoseObservation};
 pub use session::{FrameOutcome, Session, SessionConfig, SessionStats};
 pub use solve::{Pair, Solution, SolveError, SolveOptions, WARN_CONDITION, solve};
-pub use start::{
-    Candidate, LowPoint, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic,
-};
+pub use start::{Candidate, LowPoint, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic};
 pub use tip::{ProbeShape, TipDetection, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
 
 /// The unit quaternion `[w, x, y, z]` (normalised); `None` when it is zero or not finite.

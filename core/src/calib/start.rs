@@ -100,8 +100,13 @@ pub fn accumulate_background(background: &mut [u16], frame: &DepthFrame<'_>) -> 
 /// the arm covers a pixel in a few of the poses at most, and unlike the farthest depth the median does not pick
 /// up the sensor's far outliers. At most [`MAX_POSES`] frames; false (nothing done) when sizes differ or there are
 /// more frames.
-pub fn median_background<'f>(background: &mut [u16], frames: usize, frame: impl Fn(usize) -> DepthFrame<'f>) -> bool {
-    if frames == 0 || frames > MAX_POSES || (0..frames).any(|i| frame(i).depth_mm().len() != background.len()) {
+pub fn median_background<'f>(
+    background: &mut [u16],
+    frames: usize,
+    frame: impl Fn(usize) -> DepthFrame<'f>,
+) -> bool {
+    if frames == 0 || frames > MAX_POSES || (0..frames).any(|i| frame(i).depth_mm().len() != background.len())
+    {
         return false;
     }
     let mut values = [0u16; MAX_POSES];
@@ -535,7 +540,8 @@ pub fn rough_extrinsic<'f, const N: usize>(
     {
         return Err(StartError::BufferTooShort);
     }
-    let up = background_up(b.background, w, h, k, b.plane_points, b.plane_labels).ok_or(StartError::NoPlane)?;
+    let up =
+        background_up(b.background, w, h, k, b.plane_points, b.plane_labels).ok_or(StartError::NoPlane)?;
     let mut nc = 0usize;
     let mut robot_z = [0.0f32; MAX_POSES];
     if poses > robot_z.len() {
@@ -554,7 +560,12 @@ pub fn rough_extrinsic<'f, const N: usize>(
             nc += 1;
         }
     }
-    let (found, offset) = choose_tips(&b.candidates[..nc], &robot_z[..poses], options.vote_tolerance_m, b.chosen);
+    let (found, offset) = choose_tips(
+        &b.candidates[..nc],
+        &robot_z[..poses],
+        options.vote_tolerance_m,
+        b.chosen,
+    );
     if found < 4 {
         return Err(StartError::TooFewTips { found, poses });
     }
@@ -670,7 +681,9 @@ fn level_solve(
             if pose_of[a] == pose_of[c] {
                 continue;
             }
-            let Some(t) = fit(&|i| i == a || i == c) else { continue };
+            let Some(t) = fit(&|i| i == a || i == c) else {
+                continue;
+            };
             let (count, cost) = score(&t, &mut best_slots);
             if best.is_none_or(|(_, k, e)| count > k || (count == k && cost < e)) {
                 best = Some((t, count, cost));
@@ -798,7 +811,10 @@ mod tests {
         let (mut pts, mut labels) = ([Point3::origin(); 600], [0u8; 600]);
         assert!(n <= 600);
         let up = background_up(&bg, W, H, &k(), &mut pts, &mut labels).unwrap();
-        assert!((up.normal() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-3, "{up:?}");
+        assert!(
+            (up.normal() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-3,
+            "{up:?}"
+        );
         assert!((up.signed_distance(&Point3::new(0.0, 0.0, 1.5)) - 0.5).abs() < 1e-3);
     }
 
@@ -821,7 +837,10 @@ mod tests {
         let mut nc = 0;
         let level = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI);
         let lift = tip_above_lowest_corner(&level, &opts.shape);
-        assert!(lift.abs() < 1e-5, "pointing straight down: the end face is the lowest, {lift}");
+        assert!(
+            lift.abs() < 1e-5,
+            "pointing straight down: the end face is the lowest, {lift}"
+        );
         for (i, &(x, y, h)) in poses.iter().enumerate() {
             let d = scene(x, y, h, true);
             let f = DepthFrame::new(&d, W, H, Timestamp::from_us(0).unwrap(), 0).unwrap();
@@ -832,7 +851,11 @@ mod tests {
             }; 4];
             let m = low_points(&f, &k(), &bg, &up, &opts, &mut scratch, &mut out);
             assert_eq!(m, 2, "the bar and the elbow");
-            assert!((out[0].height_m - 0.1).abs() < 0.01, "the elbow is lowest: {:?}", out[0]);
+            assert!(
+                (out[0].height_m - 0.1).abs() < 0.01,
+                "the elbow is lowest: {:?}",
+                out[0]
+            );
             assert!((out[1].height_m - h).abs() < 0.01, "{:?}", out[1]);
             for lp in &out[..m] {
                 candidates[nc] = Candidate::new(i, lp, &up, &level, &opts.shape);
@@ -850,6 +873,9 @@ mod tests {
             assert!((c.tip_height_m - poses[p].2).abs() < 0.01, "pose {p}: {c:?}");
         }
         // Heights that agree with no candidate choose nothing.
-        assert_eq!(choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen).0, 1);
+        assert_eq!(
+            choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen).0,
+            1
+        );
     }
 }

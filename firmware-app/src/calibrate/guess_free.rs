@@ -94,11 +94,7 @@ pub fn collect(
                 }
                 let pose = pose_tips.len() - 1;
                 if pose < poses_wanted && kept.iter().filter(|f| f.pose == pose).count() < FRAMES_PER_POSE {
-                    kept.push(Kept {
-                        depth,
-                        capture,
-                        pose,
-                    });
+                    kept.push(Kept { depth, capture, pose });
                 }
             }
         }
@@ -210,10 +206,7 @@ pub fn collect(
             vec![false; n * CANDIDATES_PER_POSE],
         );
         let mut scratch: Box<StartScratch<16384>> = Box::default();
-        let arm_at: Vec<ArmSample> = first
-            .iter()
-            .map(|f| pose_tips[f.pose])
-            .collect();
+        let arm_at: Vec<ArmSample> = first.iter().map(|f| pose_tips[f.pose]).collect();
         let frame = |i: usize| {
             DepthFrame::new(&first[i].depth, w, h, first[i].capture, i as u32)
                 .expect("kept frames have the source's size")

@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
 use supine_core::calib::{
-    ArmHistory, ArmSample, Candidate, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats, Solution,
-    SolveOptions, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic, solve,
+    ArmHistory, ArmSample, Candidate, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats,
+    Solution, SolveOptions, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic, solve,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -162,7 +162,8 @@ pub fn guess_free_start(
     );
     let mut scratch: Box<StartScratch<16384>> = Box::default();
     let frame = |i: usize| {
-        DepthFrame::new(&frames[i], w, h, Timestamp::default(), i as u32).expect("keyframes have the frame size")
+        DepthFrame::new(&frames[i], w, h, Timestamp::default(), i as u32)
+            .expect("keyframes have the frame size")
     };
     if frames.iter().any(|f| f.len() != w as usize * h as usize) {
         return Err(StartError::BufferTooShort);
@@ -312,7 +313,8 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
                         o.start_tips = Some(tips);
                         o.start_translation_error_mm =
                             Some(translation_error_m(&s.robot_base_from_camera, &truth) * 1000.0);
-                        o.start_rotation_error_deg = Some(rotation_error_deg(&s.robot_base_from_camera, &truth));
+                        o.start_rotation_error_deg =
+                            Some(rotation_error_deg(&s.robot_base_from_camera, &truth));
                         s.robot_base_from_camera
                     }
                     Err(e) => {
