@@ -2,10 +2,11 @@
 //! where "down" is, and pair it with the arm's tip for a first, rough Kabsch whose result then serves as the prior
 //! of the precise detector ([`super::tip`]).
 //!
-//! With the bed empty or the patient still, the arm is the only thing that moves: the per-pixel farthest depth
-//! over one still frame of each pose ([`accumulate_background`]) is the scene without the arm wherever the arm
-//! was somewhere else in another pose. In each pose's frame, the foreground (nearer than that background) above
-//! the largest plane ([`background_up`]: the mattress or the floor, both horizontal) is the moving part of the arm.
+//! With the bed empty or the patient still, the arm is the only thing that moves: the per-pixel median depth
+//! over one still frame of each pose ([`median_background`]) is the scene without the arm wherever the arm was
+//! elsewhere in most poses. In each pose's frame, the foreground (nearer than that background) above
+//! the floor or mattress (of the largest planes, [`background_planes`], the one under which the arm's heights
+//! agree best; both are horizontal) is the moving part of the arm.
 //! The probe points down, so its tip is a local lowest point of the foreground: points are taken in rising height
 //! and each joins a lower neighbour's component or starts its own; components with enough points are the
 //! candidates ([`low_points`]). Which candidate is the tip is decided across poses ([`choose_tips`]): the arm's tip
@@ -31,7 +32,7 @@ use core::fmt;
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::geometry::{Isometry3, Plane, Point3, Translation3, UnitQuaternion, Vector3};
-use crate::planes::{PlaneConfig, largest_plane};
+use crate::planes::{PlaneConfig, largest_planes};
 
 use super::pairing::ArmSample;
 use super::solve::{Pair, Solution, SolveError, SolveOptions, condition_number};
@@ -135,20 +136,23 @@ const END_BAND_M: f32 = 0.03;
 /// Most poses the guess-free start takes.
 pub const MAX_POSES: usize = 64;
 
-/// "Up" in the camera: the largest plane of the background (mattress or floor), normal toward the camera, height
-/// measured from it. `points` and `labels` are scratch of at least
-/// [`crate::planes::scratch_points`]`(width, height, 6)` entries; `None` when no plane is found.
-pub fn background_up(
+/// Candidates for "up" in the camera: the largest planes of the background (mattress, floor, a raised head
+/// section, a wall), largest first, normals toward the camera, height measured from them; which one is up is
+/// decided by the arm ([`rough_extrinsic`] keeps the one under which most poses agree on the tip height).
+/// `points` and `labels` are scratch of at least [`crate::planes::scratch_points`]`(width, height, 6)` entries;
+/// returns how many planes went to `out`.
+pub fn background_planes(
     background: &[u16],
     width: u16,
     height: u16,
     k: &Intrinsics,
     points: &mut [Point3],
     labels: &mut [u8],
-) -> Option<Plane> {
+    out: &mut [Plane],
+) -> usize {
     let (w, h) = (width as usize, height as usize);
     if background.len() != w * h {
-        return None;
+        return 0;
     }
     let cfg = PlaneConfig::default();
     let stride = cfg.stride.max(1) as usize;
@@ -163,8 +167,11 @@ pub fn background_up(
             n += 1;
         }
     }
-    largest_plane(&points[..n], labels, &cfg)
+    largest_planes(&points[..n], labels, &cfg, out)
 }
+
+/// Planes tried as "up".
+pub const UP_CANDIDATES: usize = 3;
 
 /// A local lowest point of the foreground: a candidate for the probe tip.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -540,26 +547,52 @@ pub fn rough_extrinsic<'f, const N: usize>(
     {
         return Err(StartError::BufferTooShort);
     }
-    let up =
-        background_up(b.background, w, h, k, b.plane_points, b.plane_labels).ok_or(StartError::NoPlane)?;
-    let mut nc = 0usize;
+    let mut planes = [Plane::through(Vector3::zeros(), Vector3::z()); UP_CANDIDATES];
+    let n_planes = background_planes(b.background, w, h, k, b.plane_points, b.plane_labels, &mut planes);
+    if n_planes == 0 {
+        return Err(StartError::NoPlane);
+    }
     let mut robot_z = [0.0f32; MAX_POSES];
     if poses > robot_z.len() {
         return Err(StartError::BufferTooShort);
     }
     for (i, arm) in arms.iter().enumerate() {
         robot_z[i] = arm.tip_robot_base.z;
-        let mut low = [LowPoint {
-            point: Point3::origin(),
-            height_m: 0.0,
-            support: 0,
-        }; CANDIDATES_PER_POSE];
-        let m = low_points(&frame(i), k, b.background, &up, options, scratch, &mut low);
-        for lp in &low[..m] {
-            b.candidates[nc] = Candidate::new(i, lp, &up, &arm.robot_base_from_probe, &options.shape);
-            nc += 1;
+    }
+    // Candidates under a plane taken as up.
+    let candidates_under = |up: &Plane, candidates: &mut [Candidate], scratch: &mut StartScratch<N>| {
+        let mut nc = 0usize;
+        for (i, arm) in arms.iter().enumerate() {
+            let mut low = [LowPoint {
+                point: Point3::origin(),
+                height_m: 0.0,
+                support: 0,
+            }; CANDIDATES_PER_POSE];
+            let m = low_points(&frame(i), k, b.background, up, options, scratch, &mut low);
+            for lp in &low[..m] {
+                candidates[nc] = Candidate::new(i, lp, up, &arm.robot_base_from_probe, &options.shape);
+                nc += 1;
+            }
+        }
+        nc
+    };
+    // Up is the plane under which most poses agree on the tip height (a head section or a wall is tilted, so the
+    // arm's heights do not follow the heights above it).
+    let mut best_plane = (0usize, 0usize);
+    for (p, plane) in planes[..n_planes].iter().enumerate() {
+        let nc = candidates_under(plane, b.candidates, scratch);
+        let (found, _) = choose_tips(
+            &b.candidates[..nc],
+            &robot_z[..poses],
+            options.vote_tolerance_m,
+            b.chosen,
+        );
+        if found > best_plane.1 {
+            best_plane = (p, found);
         }
     }
+    let up = planes[best_plane.0];
+    let nc = candidates_under(&up, b.candidates, scratch);
     let (found, offset) = choose_tips(
         &b.candidates[..nc],
         &robot_z[..poses],
@@ -797,6 +830,10 @@ mod tests {
         d
     }
 
+    fn up_plane() -> Plane {
+        Plane::through(Vector3::new(0.0, 0.0, 2.0), Vector3::new(0.0, 0.0, -1.0))
+    }
+
     #[test]
     fn the_background_is_the_farthest_depth_and_the_floor_is_up() {
         let a = scene(-0.2, 0.0, 0.3, false);
@@ -810,7 +847,9 @@ mod tests {
         let n = crate::planes::scratch_points(W as usize, H as usize, 6);
         let (mut pts, mut labels) = ([Point3::origin(); 600], [0u8; 600]);
         assert!(n <= 600);
-        let up = background_up(&bg, W, H, &k(), &mut pts, &mut labels).unwrap();
+        let mut planes = [up_plane(); 3];
+        assert_eq!(background_planes(&bg, W, H, &k(), &mut pts, &mut labels, &mut planes), 1, "one plane");
+        let up = planes[0];
         assert!(
             (up.normal() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-3,
             "{up:?}"
