@@ -848,7 +848,11 @@ mod tests {
         let (mut pts, mut labels) = ([Point3::origin(); 600], [0u8; 600]);
         assert!(n <= 600);
         let mut planes = [up_plane(); 3];
-        assert_eq!(background_planes(&bg, W, H, &k(), &mut pts, &mut labels, &mut planes), 1, "one plane");
+        assert_eq!(
+            background_planes(&bg, W, H, &k(), &mut pts, &mut labels, &mut planes),
+            1,
+            "one plane"
+        );
         let up = planes[0];
         assert!(
             (up.normal() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-3,
