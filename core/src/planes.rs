@@ -558,6 +558,42 @@ fn mark(points: &[Point3], labels: &mut [u8], plane: &Plane, inlier_m: f32, labe
     m
 }
 
+/// The largest planes among `points` (RANSAC with `cfg`, then least squares; each found plane's points are set aside
+/// before the next search), largest first, normals turned toward the camera, into `out`; returns how many (at most
+/// `out.len()`, only planes holding `cfg.min_inlier_fraction` of the points). Where nothing else is known about the
+/// scene they are the candidates for "up" (mattress, floor, a raised head section, a wall). Cost: `cfg.iterations`
+/// hypotheses scored on at most 2048 points per plane.
+pub fn largest_planes(points: &[Point3], labels: &mut [u8], cfg: &PlaneConfig, out: &mut [Plane]) -> usize {
+    let n = points.len().min(labels.len());
+    if n < 3 {
+        return 0;
+    }
+    let (points, labels) = (&points[..n], &mut labels[..n]);
+    labels.fill(FREE);
+    let min_inliers = ((n as f32 * cfg.min_inlier_fraction) as usize).max(50);
+    let mut rng = SplitMix64::new(cfg.seed);
+    let mut found = 0;
+    while found < out.len() && found < 250 {
+        let Some(p) = ransac(points, labels, cfg, &mut rng, &|_| true) else {
+            break;
+        };
+        if mark(points, labels, &p, cfg.inlier_m, found as u8 + 1) < min_inliers {
+            break;
+        }
+        // The camera sits at the origin, on the side the normal should point to.
+        out[found] = if p.d < 0.0 {
+            Plane {
+                normal: (-p.normal()).into(),
+                d: -p.d,
+            }
+        } else {
+            p
+        };
+        found += 1;
+    }
+    found
+}
+
 #[cfg(test)]
 mod tests {
     extern crate std;

@@ -4,7 +4,9 @@
 //! The arm moves its probe through poses above the bed (empty, or with the patient still), dwelling a moment at
 //! each. Every depth frame is matched to the arm state nearest its capture time and the probe tip is found near
 //! where the current guess (`--guess FILE`, the mount drawing or a previous calibration) puts it; the still frames
-//! of each pose are averaged into one pair (`supine_core::calib::Session`). After `--poses` poses the pairs are
+//! of each pose are averaged into one pair (`supine_core::calib::Session`). Without `--guess` the still frames are
+//! kept, the first guess comes from the guess-free start (`supine_core::calib::start`) and the session runs twice
+//! over the kept frames ([`guess_free`]). After `--poses` poses the pairs are
 //! solved (Kabsch inside RANSAC, refined), the residuals printed, and the extrinsic written in the config's syntax:
 //!
 //! ```toml
@@ -31,6 +33,8 @@ use supine_drivers::source::{self, SourceErrorKind, SourceSpec};
 
 use crate::failure::Failure;
 
+mod guess_free;
+
 /// A session sized for the head computer: 4096 arm states (4 s at 1 kHz), 64 poses, 8192 detection points.
 type CalibrationSession = Session<4096, 64, 8192>;
 
@@ -53,7 +57,8 @@ pub struct CalibrateArgs {
     #[arg(long, conflicts_with_all = ["source", "link"])]
     pub from: Option<PathBuf>,
     /// The current guess of the extrinsic, a TOML file with `[robot_base_from_camera]` (a config file will do);
-    /// it tells the detector where to look for the probe.
+    /// it tells the detector where to look for the probe. Without it the probe is found from what moves above
+    /// the bed (the guess-free start: the robot base must stand level, the probe point down).
     #[arg(long)]
     pub guess: Option<PathBuf>,
     /// How far the guess may put the probe tip from where it is, metres.
@@ -138,13 +143,10 @@ fn collect(args: &CalibrateArgs) -> Result<Vec<PoseObservation>, Failure> {
     let (Some(source_str), Some(link_str)) = (&args.source, &args.link) else {
         return Err(Failure::usage("give --source and --link, or --from FILE"));
     };
-    let Some(guess_path) = &args.guess else {
-        return Err(Failure::usage(
-            "--guess FILE is needed to find the probe: a TOML file with [robot_base_from_camera] (translation_m, \
-             rotation_quat_wxyz) from the mount drawing, to within a few centimetres and degrees",
-        ));
+    let guess = match &args.guess {
+        Some(path) => Some(read_extrinsic(path)?),
+        None => None,
     };
-    let guess = read_extrinsic(guess_path)?;
     let source_spec: SourceSpec = source_str
         .parse()
         .map_err(|e: source::SourceError| Failure::usage(format!("--source: {e}")))?;
@@ -164,6 +166,9 @@ fn collect(args: &CalibrateArgs) -> Result<Vec<PoseObservation>, Failure> {
     };
     let mut arm_link = link::open(&link_spec, &options).map_err(|e| anyhow::anyhow!("{e}"))?;
     crate::links::catch_interrupts().map_err(|e| anyhow::anyhow!("installing the SIGINT handler: {e}"))?;
+    let Some(guess) = guess else {
+        return guess_free::collect(args, src.as_mut(), &k, arm_link.as_mut());
+    };
     let config = SessionConfig {
         guess_uncertainty_m: args.guess_uncertainty_m,
         ..SessionConfig::new(guess)
@@ -647,6 +652,15 @@ mod tests {
         let e = run(live_args(&dir)).unwrap_err().to_string();
         assert!(e.contains("no extrinsic") && e.contains("probe"), "{e}");
         assert!(!dir.join("extrinsic.toml").exists());
+        // Without a guess: an arm that holds one pose is too few poses.
+        let e = run(CalibrateArgs {
+            guess: None,
+            ..live_args(&dir)
+        })
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("no extrinsic") && e.contains("poses"), "{e}");
+        assert!(!dir.join("extrinsic.toml").exists());
         std::fs::remove_dir_all(&dir).ok();
     }
 
@@ -657,12 +671,15 @@ mod tests {
         let e = run(live_args(&dir)).unwrap_err().to_string();
         assert!(e.contains("out of time") && e.contains("capture clock"), "{e}");
         assert!(!dir.join("extrinsic.toml").exists());
+        // Without a guess too: the guess-free start needs still poses as well.
         let e = run(CalibrateArgs {
             guess: None,
             ..live_args(&dir)
         })
-        .unwrap_err();
-        assert_eq!(e.exit_code(), 2, "a missing guess is bad usage");
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("no extrinsic") && e.contains("out of time"), "{e}");
+        assert!(!dir.join("extrinsic.toml").exists());
         std::fs::remove_dir_all(&dir).ok();
     }
 

@@ -8,6 +8,8 @@
 //! - [`solve`]: Kabsch/Umeyama inside RANSAC over triples of pairs, a Huber-reweighted refinement, residuals and
 //!   the condition number that refuses too few, collinear or near-coplanar pose sets.
 //!
+//! - [`start`]: the guess-free start: the probe tip as a local lowest point of what moves above the bed, picked
+//!   across poses by its height, for a first rough Kabsch without any extrinsic guess.
 //! - [`session`]: the streaming glue `supine calibrate` and its evaluation share (arm states and frames in, poses out).
 //!
 //! Per frame: one detection (~0.2 ms) and one history scan; the solve runs once at the end (~1 ms for 20 poses).
@@ -16,11 +18,13 @@
 pub mod pairing;
 pub mod session;
 pub mod solve;
+pub mod start;
 pub mod tip;
 
 pub use pairing::{ArmHistory, ArmSample, DwellCollector, Match, PoseObservation};
 pub use session::{FrameOutcome, Session, SessionConfig, SessionStats};
 pub use solve::{Pair, Solution, SolveError, SolveOptions, WARN_CONDITION, solve};
+pub use start::{Candidate, LowPoint, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic};
 pub use tip::{ProbeShape, TipDetection, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
 
 /// The unit quaternion `[w, x, y, z]` (normalised); `None` when it is zero or not finite.

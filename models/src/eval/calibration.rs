@@ -13,10 +13,13 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
 use supine_core::calib::{
-    ArmSample, Pair, PoseObservation, Session, SessionConfig, SessionStats, Solution, SolveOptions, solve,
+    ArmHistory, ArmSample, Candidate, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats,
+    Solution, SolveOptions, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic, solve,
 };
 use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
 use supine_core::geometry::Isometry3;
+use supine_core::time::Timestamp;
 use supine_core::wire::stream::SerialDecoder;
 use supine_drivers::SourceErrorKind;
 use supine_drivers::oni::OniReader;
@@ -40,6 +43,10 @@ pub struct CalibrationEvalArgs {
     /// Write the figure (errors against pose count, with and without a patient) here as SVG.
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// Start from the nominal guess in `sequence.json` (as `supine calibrate --guess`) instead of the guess-free
+    /// start.
+    #[arg(long)]
+    pub nominal_guess: bool,
 }
 
 /// A session as the command runs it: 2048 arm states (20 s at 100 Hz), 64 poses, 8192 detection points.
@@ -86,6 +93,98 @@ pub fn run_session(
     }
     session.finish();
     Ok((session.poses().take(max_poses).collect(), *session.stats()))
+}
+
+/// One still frame per pose: the first frame the arm stood still at (as `run_session` decides stillness), at
+/// least [`NEW_POSE_M`] from the previous pose's tip; up to `max` poses. Returns the frames' depth and arm states.
+pub fn pose_keyframes(oni: &Path, arm: &[ArmSample], max: usize) -> Result<(Vec<Vec<u16>>, Vec<ArmSample>)> {
+    let mut reader = OniReader::open(oni).with_context(|| format!("opening {}", oni.display()))?;
+    let mut history: Box<ArmHistory<8192>> = Box::default();
+    for s in arm {
+        history.push(*s);
+    }
+    let c = SessionConfig::new(Isometry3::identity());
+    let (mut frames, mut arms) = (Vec::new(), Vec::<ArmSample>::new());
+    while arms.len() < max {
+        let frame = match reader.read_frame() {
+            Ok(f) => f,
+            Err(e) if e.kind() == SourceErrorKind::EndOfStream => break,
+            Err(e) => bail!("reading {}: {e}", oni.display()),
+        };
+        if let Match::Found {
+            sample, still: true, ..
+        } = history.match_frame(frame.capture, c.max_offset_us, c.settle_us, c.still_m)
+            && arms
+                .last()
+                .is_none_or(|l| (l.tip_robot_base - sample.tip_robot_base).norm() > NEW_POSE_M)
+        {
+            frames.push(frame.depth_mm().to_vec());
+            arms.push(sample);
+        }
+    }
+    Ok((frames, arms))
+}
+
+/// A still frame this far from the previous pose's arm tip starts a new pose, metres.
+pub const NEW_POSE_M: f32 = 0.01;
+
+/// The guess-free start over keyframes (`supine_core::calib::rough_extrinsic`): the rough extrinsic and the
+/// poses that gave a tip.
+pub fn guess_free_start(
+    frames: &[Vec<u16>],
+    arms: &[ArmSample],
+    k: &Intrinsics,
+) -> Result<(Solution, usize), StartError> {
+    let n = arms.len();
+    let (w, h) = (k.width, k.height);
+    let mut background = vec![0u16; w as usize * h as usize];
+    let np = supine_core::planes::scratch_points(w as usize, h as usize, 6);
+    let (mut plane_points, mut plane_labels) = (vec![Point3::origin(); np], vec![0u8; np]);
+    let mut candidates = vec![
+        Candidate {
+            pose: 0,
+            tip_camera: Point3::origin(),
+            tip_height_m: 0.0
+        };
+        n * supine_core::calib::start::CANDIDATES_PER_POSE
+    ];
+    let mut chosen = vec![None; n];
+    let mut pairs = vec![
+        Pair {
+            robot_base: Point3::origin(),
+            camera: Point3::origin()
+        };
+        n * supine_core::calib::start::CANDIDATES_PER_POSE
+    ];
+    let (mut residuals, mut inliers) = (
+        vec![0.0; n * supine_core::calib::start::CANDIDATES_PER_POSE],
+        vec![false; n * supine_core::calib::start::CANDIDATES_PER_POSE],
+    );
+    let mut scratch: Box<StartScratch<16384>> = Box::default();
+    let frame = |i: usize| {
+        DepthFrame::new(&frames[i], w, h, Timestamp::default(), i as u32)
+            .expect("keyframes have the frame size")
+    };
+    if frames.iter().any(|f| f.len() != w as usize * h as usize) {
+        return Err(StartError::BufferTooShort);
+    }
+    rough_extrinsic(
+        frame,
+        arms,
+        k,
+        &StartOptions::default(),
+        &mut scratch,
+        StartBuffers {
+            background: &mut background,
+            plane_points: &mut plane_points,
+            plane_labels: &mut plane_labels,
+            candidates: &mut candidates,
+            chosen: &mut chosen,
+            pairs: &mut pairs,
+            residuals: &mut residuals,
+            inliers: &mut inliers,
+        },
+    )
 }
 
 fn reader_intrinsics(_reader: &OniReader) -> Intrinsics {
@@ -138,6 +237,19 @@ pub struct Outcome {
     pub condition: Option<f32>,
     /// Why no extrinsic came out.
     pub refused: Option<String>,
+    /// Poses of the guess-free start that gave a tip (`None`: started from the nominal guess).
+    pub start_tips: Option<usize>,
+    /// Translation error of the guess-free start's rough extrinsic, mm.
+    pub start_translation_error_mm: Option<f32>,
+    /// Rotation error of the rough extrinsic, degrees.
+    pub start_rotation_error_deg: Option<f32>,
+    /// Mean distance of the detected tips (dwell means) from the true tips mapped into the camera, mm: what the
+    /// detector and the dwell averaging leave.
+    pub tip_detection_error_mm: Option<f32>,
+    /// Mean signed error of the detected tips along the camera's view ray, mm (positive: seen too far).
+    pub tip_depth_bias_mm: Option<f32>,
+    /// Mean distance of the arm's reported tips (dwell means) from the true tips, mm: encoder and kinematic error.
+    pub arm_tip_error_mm: Option<f32>,
     /// Frame counters of the second pass.
     pub frames_still: u32,
     /// Frames without a tip.
@@ -145,7 +257,7 @@ pub struct Outcome {
 }
 
 /// Evaluate one sequence directory at every pose count.
-pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
+pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>> {
     let meta: SequenceMeta = serde_json::from_slice(
         &std::fs::read(dir.join("sequence.json"))
             .with_context(|| format!("reading {}/sequence.json", dir.display()))?,
@@ -162,7 +274,12 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
     let (arm, _) = read_arm_capture(&dir.join("arm.cobs"))?;
     let oni = dir.join("sequence.oni");
     let max = *POSE_COUNTS.iter().max().unwrap_or(&20);
-    let (first, _) = run_session(&oni, &arm, SessionConfig::new(nominal), max)?;
+    let keyframes = if nominal_guess {
+        None
+    } else {
+        Some(pose_keyframes(&oni, &arm, max)?)
+    };
+    let k = Intrinsics::KINECT_V1;
     let mut out = Vec::new();
     for &n in &POSE_COUNTS {
         let mut o = Outcome {
@@ -176,12 +293,42 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
             torso_mapping_error_mm: None,
             condition: None,
             refused: None,
+            start_tips: None,
+            start_translation_error_mm: None,
+            start_rotation_error_deg: None,
+            tip_detection_error_mm: None,
+            tip_depth_bias_mm: None,
+            arm_tip_error_mm: None,
             frames_still: 0,
             frames_no_tip: 0,
         };
+        // The prior of the first pass: the nominal guess, or the guess-free start from the first `n` poses'
+        // keyframes (6 cm uncertainty, as the nominal guess has).
+        let prior = match &keyframes {
+            None => nominal,
+            Some((frames, arms)) => {
+                let m = n.min(arms.len());
+                match guess_free_start(&frames[..m], &arms[..m], &k) {
+                    Ok((s, tips)) => {
+                        o.start_tips = Some(tips);
+                        o.start_translation_error_mm =
+                            Some(translation_error_m(&s.robot_base_from_camera, &truth) * 1000.0);
+                        o.start_rotation_error_deg =
+                            Some(rotation_error_deg(&s.robot_base_from_camera, &truth));
+                        s.robot_base_from_camera
+                    }
+                    Err(e) => {
+                        o.refused = Some(e.to_string());
+                        out.push(o);
+                        continue;
+                    }
+                }
+            }
+        };
+        let (first, _) = run_session(&oni, &arm, SessionConfig::new(prior), n)?;
         // The first pass only has to give a better prior: it may use fewer poses than asked for (some are lost to
-        // the rough guess); the second pass must deliver all `n`.
-        let pass1 = match solve_poses(&first[..n.min(first.len())], true) {
+        // the rough prior); the second pass must deliver all `n`.
+        let pass1 = match solve_poses(&first, true) {
             Ok(s) => s,
             Err(e) => {
                 o.refused = Some(format!("first pass: {e}"));
@@ -201,6 +348,10 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
             out.push(o);
             continue;
         }
+        let (det, bias, arm_err) = tip_errors(&second[..n], &cal.poses_robot_base, &truth);
+        o.tip_detection_error_mm = det;
+        o.tip_depth_bias_mm = bias;
+        o.arm_tip_error_mm = arm_err;
         let sol = solve_poses(&second[..n], false);
         match sol {
             Ok(s) => {
@@ -217,6 +368,36 @@ pub fn evaluate_sequence(dir: &Path) -> Result<Vec<Outcome>> {
         out.push(o);
     }
     Ok(out)
+}
+
+/// Where the pair errors come from: each pose matched to the nearest true pose tip (within 2 cm); the mean
+/// detection error, its mean component along the view ray, and the mean arm error, mm.
+fn tip_errors(
+    poses: &[PoseObservation],
+    true_tips: &[[f32; 3]],
+    truth: &Isometry3,
+) -> (Option<f32>, Option<f32>, Option<f32>) {
+    let camera_from_robot_base = truth.inverse();
+    let (mut det, mut bias, mut arm) = (Vec::new(), Vec::new(), Vec::new());
+    for p in poses {
+        let nearest = true_tips
+            .iter()
+            .map(|t| Point3::from(*t))
+            .min_by(|a, b| (a - p.robot_base).norm().total_cmp(&(b - p.robot_base).norm()));
+        let Some(t) = nearest.filter(|t| (t - p.robot_base).norm() < 0.02) else {
+            continue;
+        };
+        let tc = camera_from_robot_base * t;
+        let e = p.camera - tc;
+        det.push(e.norm() * 1000.0);
+        bias.push(e.dot(&tc.coords.normalize()) * 1000.0);
+        arm.push((p.robot_base - t).norm() * 1000.0);
+    }
+    (
+        mean(det.into_iter()),
+        mean(bias.into_iter()),
+        mean(arm.into_iter()),
+    )
 }
 
 fn torso_error_mm(est: &Isometry3, truth: &Isometry3, points: &[[f32; 3]]) -> f32 {
@@ -274,6 +455,11 @@ pub fn summarise(outcomes: &[&Outcome]) -> serde_json::Value {
                 "residual_mm": mean(f(|o| o.residual_mm)),
                 "torso_mapping_error_mm": mean(f(|o| o.torso_mapping_error_mm)),
                 "translation_error_mm_max": max(f(|o| o.translation_error_mm)),
+                "tip_detection_error_mm": mean(f(|o| o.tip_detection_error_mm)),
+                "tip_depth_bias_mm": mean(f(|o| o.tip_depth_bias_mm)),
+                "arm_tip_error_mm": mean(f(|o| o.arm_tip_error_mm)),
+                "start_translation_error_mm": mean(f(|o| o.start_translation_error_mm)),
+                "start_rotation_error_deg": mean(f(|o| o.start_rotation_error_deg)),
                 "rotation_error_deg_max": max(f(|o| o.rotation_error_deg)),
                 "sequences": at.len(),
                 "solved": solved.len(),
@@ -302,7 +488,7 @@ fn run_inner(args: &CalibrationEvalArgs) -> Result<()> {
     );
     let mut all = Vec::new();
     for d in &dirs {
-        all.extend(evaluate_sequence(d)?);
+        all.extend(evaluate_sequence(d, args.nominal_guess)?);
         bar.inc(1);
     }
     bar.finish();

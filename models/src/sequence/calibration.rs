@@ -400,7 +400,9 @@ pub fn generate_calibration(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::calibration::{read_arm_capture, run_session, solve_poses};
+    use crate::eval::calibration::{
+        guess_free_start, pose_keyframes, read_arm_capture, run_session, solve_poses,
+    };
     use crate::scene::body::Mannequin;
     use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
     use supine_core::calib::{SessionConfig, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
@@ -506,6 +508,32 @@ mod tests {
             te < 0.02 && re < 1.0,
             "{te} m, {re} deg from {} poses",
             poses.len()
+        );
+        // Without any guess: the guess-free start from one still frame per pose, then the session from it.
+        let (frames, arms) = pose_keyframes(&oni, &arm, 8).unwrap();
+        assert_eq!(arms.len(), 8, "one keyframe per pose");
+        let (rough, tips) = guess_free_start(&frames, &arms, &Intrinsics::KINECT_V1).unwrap();
+        let (te, re) = (
+            translation_error_m(&rough.robot_base_from_camera, &truth),
+            rotation_error_deg(&rough.robot_base_from_camera, &truth),
+        );
+        assert!(
+            tips >= 6 && te < 0.1 && re < 3.0,
+            "rough start {te} m, {re} deg, {tips} tips"
+        );
+        let (poses, stats) =
+            run_session(&oni, &arm, SessionConfig::new(rough.robot_base_from_camera), 8).unwrap();
+        assert!(
+            poses.len() >= 5,
+            "{} poses after the start, {stats:?}",
+            poses.len()
+        );
+        let s = solve_poses(&poses, true).unwrap();
+        let te = translation_error_m(&s.robot_base_from_camera, &truth);
+        let re = rotation_error_deg(&s.robot_base_from_camera, &truth);
+        assert!(
+            te < 0.02 && re < 1.0,
+            "{te} m, {re} deg after the guess-free start"
         );
         // The arm's clock a minute late (far beyond this 3.2 s sequence, so no frame overlaps a shifted arm state):
         // every frame is out of time, no pose comes out.
