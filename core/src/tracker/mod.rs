@@ -306,6 +306,8 @@ pub struct Tracker<'m, 's> {
     last_good_pose: Option<Isometry3>,
     /// The acquisition candidate awaiting confirmation and how many consistent frames found it.
     candidate: Option<(Isometry3, u8)>,
+    /// The support of a right fit of this patient with this shape: set at acquisition, followed while tracking.
+    support_ref: Option<f32>,
     frames: u32,
     seq: u16,
     shape_revision: u8,
@@ -353,6 +355,10 @@ fn same_pose(a: &Isometry3, b: &Isometry3, cfg: &TorsoIcpConfig) -> bool {
     let d = a.inverse() * b;
     d.translation.vector.norm() <= cfg.confirm_m && d.rotation.angle() <= cfg.confirm_rad
 }
+
+/// Per good tracking frame, the share by which the reference support follows the fit's (a slow follow: a pose
+/// sliding off the body over a few frames still shows as a drop).
+const SUPPORT_FOLLOW: f32 = 0.02;
 
 /// Roll offsets tried when acquiring without a pose, radians.
 const ACQUIRE_ROLLS_RAD: [f32; 2] = [-0.35, 0.35];
@@ -422,6 +428,7 @@ impl<'m, 's> Tracker<'m, 's> {
             pose: None,
             last_good_pose: None,
             candidate: None,
+            support_ref: None,
             frames: 0,
             seq: 0,
             shape_revision: 0,
@@ -481,6 +488,7 @@ impl<'m, 's> Tracker<'m, 's> {
         self.pose = None;
         self.last_good_pose = None;
         self.candidate = None;
+        self.support_ref = None;
     }
 
     /// The source reported a fault; the next usable frame re-acquires.
@@ -860,7 +868,11 @@ impl<'m, 's> Tracker<'m, 's> {
                     clock,
                     watch,
                 );
-                let mut q = fit.quality(&icp_cfg);
+                let min_support = match (prior_pose, self.support_ref) {
+                    (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
+                    _ => icp_cfg.min_support,
+                };
+                let mut q = fit.quality(&icp_cfg, min_support);
                 if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
                     q = FitQuality::Failed;
@@ -910,6 +922,11 @@ impl<'m, 's> Tracker<'m, 's> {
                         FitQuality::Good => {
                             self.pose = Some(pose);
                             self.last_good_pose = Some(pose);
+                            let sup = fit.support();
+                            self.support_ref = Some(match (prior_pose, self.support_ref) {
+                                (Some(_), Some(r)) => r + SUPPORT_FOLLOW * (sup - r),
+                                _ => sup,
+                            });
                         }
                         // Coasting: the pose stays where the last good fit left it.
                         FitQuality::Occluded | FitQuality::Failed => {

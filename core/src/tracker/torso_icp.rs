@@ -31,8 +31,13 @@ pub struct TorsoIcpConfig {
     pub acquire_max_rms_m: f32,
     /// A good fit's support (inlier pairs over pairs plus see-through points) is at least this: a right pose has
     /// most pairs within the shape's mismatch and almost nothing seen through it; a wrong local minimum (turned,
-    /// shifted, or lying on the arm) has neither.
+    /// shifted, or lying on the arm) has neither. How high a right pose's support is depends on how well the
+    /// estimated shape matches the patient (0.55-0.95 measured), so this floor is low and tracking also compares
+    /// with the support the acquisition found (`support_drop`).
     pub min_support: f32,
+    /// While tracking, a good fit's support is at most this far below the reference (the acquired fit's support,
+    /// followed slowly): a fit that slides off the body loses support it had.
+    pub support_drop: f32,
     /// Consecutive acquisition fits, each within `confirm_m`/`confirm_rad` of the last, that make a pose trusted.
     pub acquire_confirm: u8,
     /// Translation that still counts as the same pose (acquisition) or as no jump (tracking), metres.
@@ -61,7 +66,8 @@ impl Default for TorsoIcpConfig {
             min_pairs: 150,
             max_rms_m: 0.014,
             acquire_max_rms_m: 0.008,
-            min_support: 0.8,
+            min_support: 0.55,
+            support_drop: 0.12,
             acquire_confirm: 2,
             confirm_m: 0.03,
             confirm_rad: 0.1,
@@ -100,12 +106,13 @@ impl TorsoFit {
         self.association.rms_m() <= cfg.acquire_max_rms_m
     }
 
-    /// The verdict for the state machine.
-    pub fn quality(&self, cfg: &TorsoIcpConfig) -> FitQuality {
+    /// The verdict for the state machine; `min_support` is `cfg.min_support` or, while tracking, what the
+    /// reference support asks.
+    pub fn quality(&self, cfg: &TorsoIcpConfig, min_support: f32) -> FitQuality {
         let a = &self.association;
         if a.pairs >= cfg.min_pairs as usize
             && a.rms_m() <= cfg.max_rms_m
-            && self.support() >= cfg.min_support
+            && self.support() >= min_support
             && self.visible >= cfg.min_visible
         {
             FitQuality::Good
@@ -225,11 +232,20 @@ mod tests {
     #[test]
     fn a_right_fit_is_good_and_a_fit_seen_through_is_not() {
         let cfg = TorsoIcpConfig::default();
-        assert_eq!(fit(600, 570, 100, 30, 0).quality(&cfg), FitQuality::Good);
+        assert_eq!(
+            fit(600, 570, 100, 30, 0).quality(&cfg, cfg.min_support),
+            FitQuality::Good
+        );
         // Same residual, but the camera sees the mattress through a third of the model: a wrong local minimum.
-        assert_eq!(fit(600, 570, 100, 300, 0).quality(&cfg), FitQuality::Failed);
+        assert_eq!(
+            fit(600, 570, 100, 300, 0).quality(&cfg, cfg.min_support),
+            FitQuality::Failed
+        );
         // Many pairs outside the inlier band.
-        assert_eq!(fit(600, 300, 100, 0, 0).quality(&cfg), FitQuality::Failed);
+        assert_eq!(
+            fit(600, 300, 100, 0, 0).quality(&cfg, cfg.min_support),
+            FitQuality::Failed
+        );
     }
 
     #[test]
@@ -238,8 +254,11 @@ mod tests {
         // 50 pairs seen; the arm's shadow leaves 700 model points on pixels without depth.
         let f = fit(50, 50, 0, 0, 700);
         assert!(f.visible < cfg.min_visible);
-        assert_eq!(f.quality(&cfg), FitQuality::Occluded);
+        assert_eq!(f.quality(&cfg, cfg.min_support), FitQuality::Occluded);
         // With the same few pairs and nothing hidden, the patient is simply not there.
-        assert_eq!(fit(50, 50, 0, 0, 0).quality(&cfg), FitQuality::Failed);
+        assert_eq!(
+            fit(50, 50, 0, 0, 0).quality(&cfg, cfg.min_support),
+            FitQuality::Failed
+        );
     }
 }
