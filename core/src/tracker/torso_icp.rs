@@ -236,11 +236,15 @@ mod tests {
             fit(600, 570, 100, 30, 0).quality(&cfg, cfg.min_support),
             FitQuality::Good
         );
-        // Same residual, but the camera sees the mattress through a third of the model: a wrong local minimum.
+        // Same residual, but the camera sees the mattress through half of the model: a wrong local minimum.
         assert_eq!(
-            fit(600, 570, 100, 300, 0).quality(&cfg, cfg.min_support),
+            fit(600, 570, 100, 600, 0).quality(&cfg, cfg.min_support),
             FitQuality::Failed
         );
+        // A third seen through passes the floor, but not while tracking a patient whose right fit had 0.9.
+        let third = fit(600, 570, 100, 300, 0);
+        assert_eq!(third.quality(&cfg, cfg.min_support), FitQuality::Good);
+        assert_eq!(third.quality(&cfg, 0.9 - cfg.support_drop), FitQuality::Failed);
         // Many pairs outside the inlier band.
         assert_eq!(
             fit(600, 300, 100, 0, 0).quality(&cfg, cfg.min_support),
