@@ -17,7 +17,7 @@ source "$peers/cargo-args.bash"
 if [[ $# -ge 1 ]]; then
     supine=$1
 else
-    cargo build -q "${supine_cargo[@]}"
+    "${supine_build[@]}"
     supine=$root/target/debug/supine
 fi
 tmp=$(mktemp -d)

@@ -24,7 +24,7 @@ command -v socat >/dev/null || die "socat is not installed (tests/deps/apt.txt; 
 [[ -f $dbc ]] || die "DBC not found at $dbc"
 
 source "$root/tests/peers/cargo-args.bash"
-cargo build -q "${supine_cargo[@]}"
+"${supine_build[@]}"
 bin=$root/target/debug/supine
 
 tmp=$(mktemp -d)

@@ -15,7 +15,7 @@ for tool in "$py" "$cantools"; do
     fi
 done
 source tests/peers/cargo-args.bash
-timeout 600 cargo build -q "${supine_cargo[@]}"
+timeout 600 "${supine_build[@]}"
 bin=target/debug/supine
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT

@@ -19,5 +19,5 @@ timeout 60 "$py" -c "import can, serial" || {
     exit 1
 }
 source tests/peers/cargo-args.bash
-timeout 600 cargo build -q "${supine_cargo[@]}"
+timeout 600 "${supine_build[@]}"
 timeout 120 "$py" tests/peers/wire_slcan_pty.py target/debug/supine
