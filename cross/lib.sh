@@ -85,6 +85,18 @@ cross_env() {
     export RUSTDOC=${cross_rustc%/*}/rustdoc
     export CARGO_TARGET_DIR=$cross_target_dir
     export "CARGO_TARGET_${up}_LINKER=$linker"
+    # The host's linker too, whatever ARCH is: with --target equal to the host triple, cargo links build scripts
+    # and proc macros with [target.HOST].linker and keeps it in their fingerprint, so a build for x86_64 (which
+    # sets it) and one for aarch64 (which did not) invalidated each other's host artifacts, and with them every
+    # crate: cross/package rebuilt the whole aarch64 binary (~200 s) after cross/test's x86_64 build.
+    local host_up
+    host_up=$("$cross_rustc" -vV | sed -n 's/^host: //p')
+    host_up=${host_up^^}
+    host_up=${host_up//-/_}
+    [[ -n $host_up ]] || die "$cross_rustc -vV names no host triple"
+    if [[ $host_up != "$up" ]]; then
+        export "CARGO_TARGET_${host_up}_LINKER=cc"
+    fi
     if [[ -n $runner ]]; then
         export "CARGO_TARGET_${up}_RUNNER=$runner"
     fi

@@ -27,13 +27,23 @@ step() {
     done
     echo "=== step $name: $*"
     local t0=$SECONDS
-    if "$@"; then
+    # CPU seconds (user + system, the step's processes and their children) beside the wall time: on a shared
+    # machine the wall time depends on the neighbours, the CPU time much less, so step costs compare across runs.
+    local TIMEFORMAT="%U %S"
+    local times status=0
+    times=$(mktemp)
+    # The step's stderr goes to fd 3 (run.sh's stderr), so only the `time` report lands in $times.
+    { time "$@" 2>&3; } 3>&2 2>"$times" || status=$?
+    local cpu
+    cpu=$(awk 'END { printf "%.0f", $1 + $2 }' "$times")
+    rm -f "$times"
+    if ((status == 0)); then
         passed=$((passed + 1))
-        echo "=== ok   $name ($((SECONDS - t0)) s)"
+        echo "=== ok   $name ($((SECONDS - t0)) s, cpu $cpu s)"
     else
         failed=$((failed + 1))
         failures+=("$name")
-        echo "=== FAIL $name ($((SECONDS - t0)) s)"
+        echo "=== FAIL $name ($((SECONDS - t0)) s, cpu $cpu s)"
     fi
 }
 

@@ -14,13 +14,12 @@ cd "$(dirname "$0")/../.."
 root=$(pwd)
 py=${SUPINE_PYTHON:-$root/.venv/bin/python}
 peers=$root/tests/peers
-# Under tests/run.sh (SUPINE_PEERS=1) reuse the test step's --all-features build instead of building another.
-features=()
-if [[ -n ${SUPINE_PEERS:-} ]]; then features=(--all-features); fi
+# Under tests/run.sh (SUPINE_PEERS=1) reuse the test step's build instead of building another (see cargo-args.bash).
+source "$peers/cargo-args.bash"
 if [[ $# -ge 1 ]]; then
     supine=$1
 else
-    cargo build -q -p supine "${features[@]}"
+    "${supine_build[@]}"
     supine=$root/target/debug/supine
 fi
 tmp=$(mktemp -d)
@@ -31,7 +30,7 @@ cleanup() {
 }
 trap cleanup EXIT
 
-SUPINE_KEEP_MCAP=$tmp/overlays.mcap cargo test -q -p supine "${features[@]}" mcap_recording_of_the_demo >/dev/null
+SUPINE_KEEP_MCAP=$tmp/overlays.mcap cargo test -q "${supine_cargo[@]}" mcap_recording_of_the_demo >/dev/null
 "$py" "$peers/foxglove_mcap.py" "$tmp/overlays.mcap" --frames 60 --overlays
 
 "$supine" replay models/artifacts/demo/sequence.oni --record "$tmp/demo.mcap" >/dev/null

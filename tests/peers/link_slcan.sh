@@ -23,7 +23,8 @@ die() {
 command -v socat >/dev/null || die "socat is not installed (tests/deps/apt.txt; run tests/setup.sh)"
 [[ -f $dbc ]] || die "DBC not found at $dbc"
 
-cargo build -q -p supine
+source "$root/tests/peers/cargo-args.bash"
+"${supine_build[@]}"
 bin=$root/target/debug/supine
 
 tmp=$(mktemp -d)

@@ -14,7 +14,8 @@ for tool in "$py" "$cantools"; do
         exit 1
     fi
 done
-timeout 600 cargo build -q -p supine
+source tests/peers/cargo-args.bash
+timeout 600 "${supine_build[@]}"
 bin=target/debug/supine
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT

@@ -18,5 +18,6 @@ timeout 60 "$py" -c "import can, serial" || {
     echo "wire_slcan_pty: python-can or pyserial missing from .venv (run tests/setup.sh)" >&2
     exit 1
 }
-timeout 600 cargo build -q -p supine
+source tests/peers/cargo-args.bash
+timeout 600 "${supine_build[@]}"
 timeout 120 "$py" tests/peers/wire_slcan_pty.py target/debug/supine
