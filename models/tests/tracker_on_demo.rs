@@ -179,6 +179,7 @@ fn icp_converges_back_from_a_known_perturbation() {
         &icp,
         &params,
         &budget,
+        0,
         &clock,
         &Stopwatch::start(&clock),
     );
@@ -200,6 +201,7 @@ fn icp_converges_back_from_a_known_perturbation() {
             &icp,
             &params,
             &budget,
+            0,
             &clock,
             &Stopwatch::start(&clock),
         );

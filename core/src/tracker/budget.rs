@@ -5,6 +5,8 @@
 //! and tests a virtual one, which makes every run bit-identical). Cut order, cheapest loss first:
 //! 1. ICP iterations: before each iteration after the first, the tracker checks that the time spent so far plus
 //!    the slowest iteration seen in this frame plus the reserve for probe mapping and packets fits the budget.
+//!    Acquisition starts keep `acquire_min_iterations` (torso_icp) whatever the budget: a tracker on a board too
+//!    slow for the budget overruns while it acquires rather than never acquiring.
 //! 2. Shape refinement (init phase only): skipped, keeping the regression estimate, when the frame has already used
 //!    half its budget before it would start.
 //!

@@ -865,6 +865,11 @@ impl<'m, 's> Tracker<'m, 's> {
                     &icp_cfg,
                     if from_prior(i) { &params } else { &acquire_params },
                     &self.cfg.budget,
+                    if prior_pose.is_none() {
+                        icp_cfg.acquire_min_iterations
+                    } else {
+                        0
+                    },
                     clock,
                     watch,
                 );

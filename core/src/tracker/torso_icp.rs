@@ -44,6 +44,9 @@ pub struct TorsoIcpConfig {
     pub confirm_m: f32,
     /// Rotation that still counts as the same pose, radians.
     pub confirm_rad: f32,
+    /// ICP iterations an acquisition start always gets, even past the budget (the overrun is counted): on a head
+    /// computer too slow for the budget, cutting them would keep the tracker acquiring forever.
+    pub acquire_min_iterations: u8,
     /// Below this share of the front-facing torso points visible (the rest occluded), the torso is occluded.
     pub min_visible: f32,
     /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
@@ -71,6 +74,7 @@ impl Default for TorsoIcpConfig {
             acquire_confirm: 2,
             confirm_m: 0.03,
             confirm_rad: 0.1,
+            acquire_min_iterations: 5,
             min_visible: 0.3,
             occluded_below: 0.7,
             occluder_margin_m: 0.04,
@@ -139,7 +143,8 @@ pub fn icp_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> Icp
 }
 
 /// Register the torso model (`vertices`/`normals`, torso frame) to `frame` from `start`; returns the refined
-/// `camera_from_torso` (the start when no step could be taken) and what the fit did.
+/// `camera_from_torso` (the start when no step could be taken) and what the fit did. The budget cuts iterations
+/// after the first `min_iterations`.
 #[allow(clippy::too_many_arguments)] // the frame, its camera, the model, the start, settings and the clock
 pub fn fit_torso(
     frame: &DepthFrame<'_>,
@@ -150,6 +155,7 @@ pub fn fit_torso(
     cfg: &TorsoIcpConfig,
     params: &IcpParams,
     budget: &BudgetConfig,
+    min_iterations: u8,
     clock: &(impl Clock + ?Sized),
     watch: &Stopwatch,
 ) -> (Isometry3, TorsoFit) {
@@ -158,7 +164,7 @@ pub fn fit_torso(
     let mut slowest = 0u32;
     for it in 0..budget.icp_iterations {
         let before = watch.elapsed(clock);
-        if it > 0 && !iteration_fits(budget, before, slowest) {
+        if it >= min_iterations.max(1) && !iteration_fits(budget, before, slowest) {
             fit.cut = true;
             break;
         }
