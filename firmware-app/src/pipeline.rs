@@ -193,7 +193,7 @@ impl std::fmt::Display for PlayError {
 impl std::error::Error for PlayError {}
 
 /// An arm state synthesised from the truth: the true probe tip in `robot_base`, sampled at the frame's time.
-fn arm_from_truth(truth: &Truth, i: usize, frame: &DepthFrame<'_>) -> Option<ArmSample> {
+pub fn arm_from_truth(truth: &Truth, i: usize, frame: &DepthFrame<'_>) -> Option<ArmSample> {
     let m = truth.frame(i)?.world_from_probe.as_ref()?;
     let p = supine_core::geometry::isometry_from_rows(m);
     Some(ArmSample {
