@@ -2,7 +2,8 @@
 # Benchmarks of supine side by side with what users would pick instead (issue 14): criterion medians of every
 # per-frame stage, supine's ICP against Open3D and small_gicp, supine's joint forest against scikit-learn, and the
 # whole tracking frame (criterion `frame` bench; per-frame samples from `supine frame-bench`; peak RSS of
-# `supine demo`; instructions per frame on aarch64 and x86-64 from cross/count-instructions). Installs its Python peers into .venv
+# `supine demo`; instructions per frame on aarch64 and x86-64 from cross/count-instructions). Installs its Python
+# peers into .venv
 # (tests/bench/requirements.txt), writes the JSON report and regenerates docs/BENCHMARKS.md (+ PNG plots in
 # docs/bench/) from a full run; a --quick run writes its report under target/bench/quick/ and leaves docs/ alone.
 #
@@ -13,6 +14,9 @@
 #   --instructions     count instructions per frame (cross/count-instructions, every workload; builds both cross
 #                      targets first, a few minutes): the default of a full run, off for --quick
 #   --no-instructions  skip the count (frame_instructions_aarch64 is then null)
+#   --instructions-from FILE
+#                      take the counts from a `cross/count-instructions --json FILE` run made at the same commit
+#                      instead of counting again (the page names the file's commit)
 #
 # Single-threaded everywhere: the Rust sides run pinned to CPU 0 with one rayon thread, the Python peers with
 # OMP/BLAS at one thread and n_jobs=1.
@@ -23,13 +27,17 @@ root=$(pwd)
 quick=0
 json=""
 instructions=-1
+insn_from=""
 while (($#)); do
     case $1 in
     --quick) quick=1 ;;
     --json) [[ $# -ge 2 ]] || { echo "tests/bench/run.sh: --json needs a file" >&2; exit 2; }; json=$2; shift ;;
     --instructions) instructions=1 ;;
     --no-instructions) instructions=0 ;;
-    -h | --help) sed -n '2,19p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --instructions-from)
+        [[ $# -ge 2 && -f $2 ]] || { echo "tests/bench/run.sh: --instructions-from needs an existing file" >&2; exit 2; }
+        insn_from=$(realpath "$2"); instructions=0; shift ;;
+    -h | --help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "tests/bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
     shift
@@ -96,6 +104,9 @@ if [[ -x /usr/bin/time ]]; then
 fi
 if ((instructions)); then
     run cross/count-instructions --json "$work/instructions.json" >"$work/instructions.txt"
+elif [[ -n $insn_from ]]; then
+    cp "$insn_from" "$work/instructions.json"
+    commands+=("cross/count-instructions --json FILE  # counted separately, at commit $(python3 -c 'import json,sys; print(json.load(open(sys.argv[1])).get("commit"))' "$insn_from")")
 fi
 
 # 3. ICP: problems from held-out sequences, supine's registrations, then the peers on the same files.

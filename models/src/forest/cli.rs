@@ -87,7 +87,7 @@ pub fn run_convert(a: &ConvertJointsArgs) -> Result<()> {
         let view = ForestView::parse(&out).context("the converted forest does not validate")?;
         let exact = view.vote_shift() == 0;
         if exact {
-            let n = check_same_inference(&old, &view, &per_tree)?;
+            let n = check_same_inference(&old, &view, &per_tree, baseline)?;
             eprintln!("checked: {} nodes and {n} leaf votes read back bit for bit", q.nodes.len());
         } else {
             eprintln!(
@@ -439,7 +439,7 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
                 base_path.display(),
                 path.display()
             );
-            super::encode::check_same_inference(&view, &v, &per_tree)
+            super::encode::check_same_inference(&view, &v, &per_tree, false)
                 .with_context(|| format!("{} does not belong to {}", base_path.display(), path.display()))?;
             Some(v)
         }

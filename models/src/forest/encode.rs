@@ -174,9 +174,14 @@ impl Quantised {
     }
 }
 
-/// Check that `new` answers every node, refined and (where both have it) baseline query of `old` with the same
-/// bits; returns the number of leaf votes compared.
-pub fn check_same_inference(old: &dyn ForestModel, new: &ForestView<'_>, nodes_per_tree: &[u32]) -> Result<usize> {
+/// Check that `new` answers every node, refined and (with `baseline`) baseline query of `old` with the same bits;
+/// returns the number of leaf votes compared.
+pub fn check_same_inference(
+    old: &dyn ForestModel,
+    new: &ForestView<'_>,
+    nodes_per_tree: &[u32],
+    baseline: bool,
+) -> Result<usize> {
     ensure!(old.tree_count() == new.tree_count(), "tree counts differ");
     for (t, &n) in nodes_per_tree.iter().enumerate() {
         for i in 0..n {
@@ -193,7 +198,7 @@ pub fn check_same_inference(old: &dyn ForestModel, new: &ForestView<'_>, nodes_p
                 "leaf {l} point {p}: refined vote {a:?} became {b:?}"
             );
             votes += 1;
-            if new.has_baseline() {
+            if baseline {
                 for m in 0..MODES {
                     let (a, b) = (old.baseline(l, p, m), new.baseline(l, p, m));
                     ensure!(a == b, "leaf {l} point {p} mode {m}: baseline {a:?} became {b:?}");
