@@ -52,7 +52,11 @@ fn ping_pong(i: u64, len: usize) -> usize {
     }
     let period = 2 * (len as u64 - 1);
     let k = i % period;
-    if k < len as u64 { k as usize } else { (period - k) as usize }
+    if k < len as u64 {
+        k as usize
+    } else {
+        (period - k) as usize
+    }
 }
 
 /// Peak resident set of this process so far (VmHWM), KiB; `None` where /proc does not say.
@@ -104,25 +108,29 @@ pub fn run(args: FrameBenchArgs) -> Result<(), Failure> {
     let mut buf = [0u8; supine_core::wire::serial::MAX_WIRE_LEN];
     let mut wire_bytes = 0u64;
     let mut step = 0u64;
-    let mut process = |tracker: &mut Tracker<'_, '_>, wire_bytes: &mut u64| -> Result<TrackerState, Failure> {
-        let j = ping_pong(step, frames.len());
-        let t = Timestamp::from_us(1 + step * PERIOD_US)
-            .ok_or_else(|| anyhow::anyhow!("--frames: too many frames for the timestamp range"))?;
-        clock.set(t);
-        let f = DepthFrame::new(&frames[j], k.width, k.height, t, step as u32)
-            .map_err(|e| anyhow::anyhow!("frame {j}: {e}"))?;
-        let arm = truth.as_ref().and_then(|tr| pipeline::arm_from_truth(tr, j, &f));
-        let report = tracker.process(&f, arm.as_ref(), &clock);
-        for m in &report.packets {
-            if let Ok(n) = m.encode_serial(&mut buf) {
-                *wire_bytes += n as u64;
+    let mut process =
+        |tracker: &mut Tracker<'_, '_>, wire_bytes: &mut u64| -> Result<TrackerState, Failure> {
+            let j = ping_pong(step, frames.len());
+            let t = Timestamp::from_us(1 + step * PERIOD_US)
+                .ok_or_else(|| anyhow::anyhow!("--frames: too many frames for the timestamp range"))?;
+            clock.set(t);
+            let f = DepthFrame::new(&frames[j], k.width, k.height, t, step as u32)
+                .map_err(|e| anyhow::anyhow!("frame {j}: {e}"))?;
+            let arm = truth.as_ref().and_then(|tr| pipeline::arm_from_truth(tr, j, &f));
+            let report = tracker.process(&f, arm.as_ref(), &clock);
+            for m in &report.packets {
+                if let Ok(n) = m.encode_serial(&mut buf) {
+                    *wire_bytes += n as u64;
+                }
             }
-        }
-        step += 1;
-        Ok(report.state)
-    };
+            step += 1;
+            Ok(report.state)
+        };
     let mut init_frames = 0u32;
-    while matches!(tracker.state(), TrackerState::Initialising | TrackerState::Acquiring) {
+    while matches!(
+        tracker.state(),
+        TrackerState::Initialising | TrackerState::Acquiring
+    ) {
         if init_frames == MAX_INIT_FRAMES {
             return Err(anyhow::anyhow!(
                 "the tracker did not acquire the patient in {MAX_INIT_FRAMES} frames of {}",

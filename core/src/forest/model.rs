@@ -234,7 +234,8 @@ impl<'a> ForestView<'a> {
         if trees == 0 || trees > MAX_TREES {
             return Err(invalid(tags::HEAD, "tree count must be 1..=4"));
         }
-        if nodes < trees || nodes >= LEAF_BIT as usize || leaves == 0 || leaves > MAX_NODE_INDEX as usize + 1 {
+        if nodes < trees || nodes >= LEAF_BIT as usize || leaves == 0 || leaves > MAX_NODE_INDEX as usize + 1
+        {
             return Err(invalid(tags::HEAD, "node or leaf count out of range"));
         }
         if samples == 0 || samples as usize > crate::forest::MAX_SAMPLES {
@@ -260,7 +261,10 @@ impl<'a> ForestView<'a> {
                 return Err(invalid(tags::TREE, "tree starts must increase"));
             }
             if tree_start[t + 1] - tree_start[t] > MAX_NODE_INDEX {
-                return Err(invalid(tags::TREE, "a tree has more nodes than a record can address"));
+                return Err(invalid(
+                    tags::TREE,
+                    "a tree has more nodes than a record can address",
+                ));
             }
         }
         let node_words = file.typed::<u32>(tags::NODE, Some(nodes * 2))?;
@@ -287,7 +291,10 @@ impl<'a> ForestView<'a> {
             ))
         } else {
             if file.section(tags::BVOT).is_ok() || file.section(tags::BWGT).is_ok() {
-                return Err(invalid(tags::HEAD, "baseline sections present without the baseline flag"));
+                return Err(invalid(
+                    tags::HEAD,
+                    "baseline sections present without the baseline flag",
+                ));
             }
             None
         };
@@ -716,9 +723,15 @@ mod tests {
         // Structurally valid containers with bad forest data.
         type Edit = fn(&mut Parts);
         let cases: [(Edit, Tag); 8] = [
-            (|p| p.nodes[1] = node_words(Some(split()), 0).unwrap()[1], tags::NODE), // a cycle
-            (|p| p.nodes[1] = node_words(Some(split()), 2).unwrap()[1], tags::NODE), // right child past the end
-            (|p| p.nodes[7] = node_words(None, 3).unwrap()[1], tags::NODE),          // leaf id out of range
+            (
+                |p| p.nodes[1] = node_words(Some(split()), 0).unwrap()[1],
+                tags::NODE,
+            ), // a cycle
+            (
+                |p| p.nodes[1] = node_words(Some(split()), 2).unwrap()[1],
+                tags::NODE,
+            ), // right child past the end
+            (|p| p.nodes[7] = node_words(None, 3).unwrap()[1], tags::NODE), // leaf id out of range
             (|p| p.tree[1] = 0, tags::TREE),
             (|p| p.head[0] = 9, tags::HEAD),
             (|p| p.parm[4] = f32::NAN, tags::PARM),

@@ -59,7 +59,11 @@ pub fn run_convert(a: &ConvertJointsArgs) -> Result<()> {
     let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
     let q = match ForestView::parse(&bytes) {
         Ok(v) => {
-            ensure!(v.has_baseline() || a.baseline_out.is_none(), "{} stores no baseline leaves", a.input.display());
+            ensure!(
+                v.has_baseline() || a.baseline_out.is_none(),
+                "{} stores no baseline leaves",
+                a.input.display()
+            );
             from_view(&v)
         }
         Err(supine_core::model_file::ModelFileError::UnsupportedKindVersion { found: 1, .. }) => {
@@ -88,7 +92,10 @@ pub fn run_convert(a: &ConvertJointsArgs) -> Result<()> {
         let exact = view.vote_shift() == 0;
         if exact {
             let n = check_same_inference(&old, &view, &per_tree, baseline)?;
-            eprintln!("checked: {} nodes and {n} leaf votes read back bit for bit", q.nodes.len());
+            eprintln!(
+                "checked: {} nodes and {n} leaf votes read back bit for bit",
+                q.nodes.len()
+            );
         } else {
             eprintln!(
                 "note: refined weights exceed ±2047 mm, stored in {} mm units (not bit-identical)",
@@ -101,7 +108,11 @@ pub fn run_convert(a: &ConvertJointsArgs) -> Result<()> {
             path.display(),
             out.len(),
             supine_core::forest::model::VERSION,
-            if baseline { "refined and baseline leaves" } else { "refined leaves only" },
+            if baseline {
+                "refined and baseline leaves"
+            } else {
+                "refined leaves only"
+            },
             a.input.display(),
             bytes.len()
         );
@@ -430,7 +441,11 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
     let base_view = match &base_bytes {
         Some(b) => {
             let v = ForestView::parse(b).with_context(|| format!("loading {}", base_path.display()))?;
-            ensure!(v.has_baseline(), "{} stores no baseline leaves", base_path.display());
+            ensure!(
+                v.has_baseline(),
+                "{} stores no baseline leaves",
+                base_path.display()
+            );
             let starts = view.tree_starts();
             let per_tree: Vec<u32> = starts.windows(2).map(|w| w[1] - w[0]).collect();
             ensure!(
@@ -460,11 +475,14 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
             });
         }
         None => {
-            let baseline: Option<&(dyn supine_core::forest::model::ForestModel + Sync)> = if view.has_baseline() {
-                Some(&view)
-            } else {
-                base_view.as_ref().map(|v| v as &(dyn supine_core::forest::model::ForestModel + Sync))
-            };
+            let baseline: Option<&(dyn supine_core::forest::model::ForestModel + Sync)> =
+                if view.has_baseline() {
+                    Some(&view)
+                } else {
+                    base_view
+                        .as_ref()
+                        .map(|v| v as &(dyn supine_core::forest::model::ForestModel + Sync))
+                };
             match baseline {
                 Some(b) => {
                     eprintln!(

@@ -67,7 +67,10 @@ impl Quantised {
     /// Encode as a version 2 `JFOR` file.
     pub fn to_bytes(&self) -> Result<Vec<u8>> {
         let trees = self.tree_start.len();
-        ensure!((1..=MAX_TREES).contains(&trees), "forest must have 1..={MAX_TREES} trees");
+        ensure!(
+            (1..=MAX_TREES).contains(&trees),
+            "forest must have 1..={MAX_TREES} trees"
+        );
         let leaves = self.leaf_count();
         ensure!(
             self.refined_mm.len() == leaves * P * 3 && self.rcon.len() == leaves * P,
@@ -75,7 +78,14 @@ impl Quantised {
         );
         let shift = vote_shift(&self.refined_mm)?;
         let flags = if self.baseline.is_some() { FLAG_BASELINE } else { 0 };
-        let head = [trees as u32, self.nodes.len() as u32, leaves as u32, self.samples, shift, flags];
+        let head = [
+            trees as u32,
+            self.nodes.len() as u32,
+            leaves as u32,
+            self.samples,
+            shift,
+            flags,
+        ];
         let mut node_bytes = Vec::with_capacity(self.nodes.len() * 8);
         for (i, &(test, index)) in self.nodes.iter().enumerate() {
             let w = node_words(test, index).with_context(|| {
@@ -129,9 +139,16 @@ impl Quantised {
     pub fn from_v1(bytes: &[u8]) -> Result<Self> {
         let f = ModelFile::parse(bytes, KIND, 1).context("not a version 1 joint forest")?;
         let head = f.typed::<u32>(tags::HEAD, Some(4))?;
-        let (trees, nodes, leaves, samples) =
-            (head.at(0) as usize, head.at(1) as usize, head.at(2) as usize, head.at(3));
-        ensure!((1..=MAX_TREES).contains(&trees), "tree count {trees} out of range");
+        let (trees, nodes, leaves, samples) = (
+            head.at(0) as usize,
+            head.at(1) as usize,
+            head.at(2) as usize,
+            head.at(3),
+        );
+        ensure!(
+            (1..=MAX_TREES).contains(&trees),
+            "tree count {trees} out of range"
+        );
         let tree = f.typed::<u32>(tags::TREE, Some(trees))?;
         let split = f.typed::<i8>(tags::SPLT, Some(nodes * 4))?;
         let thrs = f.typed::<i16>(tags::THRS, Some(nodes))?;
@@ -194,7 +211,8 @@ pub fn check_same_inference(
         for p in 0..P {
             let (a, b) = (old.refined(l, p), new.refined(l, p));
             ensure!(
-                a.offset.map(f32::to_bits) == b.offset.map(f32::to_bits) && a.weight.to_bits() == b.weight.to_bits(),
+                a.offset.map(f32::to_bits) == b.offset.map(f32::to_bits)
+                    && a.weight.to_bits() == b.weight.to_bits(),
                 "leaf {l} point {p}: refined vote {a:?} became {b:?}"
             );
             votes += 1;
@@ -272,6 +290,9 @@ mod tests {
         assert_eq!(vote_shift(&[-4094]).unwrap(), 1);
         assert_eq!(vote_shift(&[4095]).unwrap(), 2);
         assert!(vote_shift(&[40_000]).is_err());
-        assert_eq!((scaled(3, 1), scaled(-3, 1), scaled(2, 1), scaled(-1, 1)), (2, -2, 1, -1));
+        assert_eq!(
+            (scaled(3, 1), scaled(-3, 1), scaled(2, 1), scaled(-1, 1)),
+            (2, -2, 1, -1)
+        );
     }
 }

@@ -3,10 +3,10 @@
 //! mm, packed by [`super::encode`] into 12 bits, confidences u8 on a log scale, mode weights u8). The float forest runs through core's inference too (it implements
 //! [`ForestModel`]), so "refined" and "quantised" differ only by the quantisation.
 
+use super::encode::Quantised;
 use super::tree::Tree;
 use anyhow::{Result, ensure};
 use supine_core::forest::model::confidence_code;
-use super::encode::Quantised;
 use supine_core::forest::model::{ForestModel, LEAF_BIT, LeafVote, Node, PointParams};
 use supine_core::forest::{MAX_TREES, MODES};
 use supine_core::salient::SalientPoint;
