@@ -87,7 +87,7 @@ pub const fn vote_bytes(leaves: usize) -> usize {
 /// into `out` (length [`vote_bytes`] of `q.len() / (P * 3)` leaves, zeroed by the caller). Returns false when a
 /// value does not fit 12 bits or the lengths disagree.
 pub fn pack_votes(q: &[i32], out: &mut [u8]) -> bool {
-    if q.len() % (P * 3) != 0 || out.len() != vote_bytes(q.len() / (P * 3)) {
+    if !q.len().is_multiple_of(P * 3) || out.len() != vote_bytes(q.len() / (P * 3)) {
         return false;
     }
     for (k, &v) in q.iter().enumerate() {
