@@ -53,9 +53,14 @@ pub struct DemoArgs {
 }
 
 fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
-    if let Some(path) = &args.recording {
-        return Ok(path.clone());
+    match &args.recording {
+        Some(path) => Ok(path.clone()),
+        None => find_recording_path(),
     }
+}
+
+/// The committed demo recording in the first model directory that has it.
+pub fn find_recording_path() -> Result<PathBuf, Failure> {
     let dirs = crate::model_dirs::model_dirs();
     dirs.iter().map(|d| d.join(DEMO_RECORDING)).find(|p| p.is_file()).ok_or_else(|| {
         let tried: Vec<String> = dirs.iter().map(|d| d.join(DEMO_RECORDING).display().to_string()).collect();

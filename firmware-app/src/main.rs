@@ -12,6 +12,7 @@ mod demo;
 mod failure;
 mod faults;
 mod foxglove;
+mod frame_bench;
 mod info;
 mod links;
 mod model_dirs;
@@ -63,6 +64,9 @@ enum Command {
     /// Wire protocol tools: print samples, decode captures, bring up a link to the arm controller.
     #[command(subcommand)]
     Wire(wire::WireCommand),
+    /// The tracker's steady-state frame on the demo recording decoded into memory first: latency per frame (and,
+    /// under cross/count-instructions, instructions per frame) without the recording's decompression.
+    FrameBench(frame_bench::FrameBenchArgs),
 }
 
 /// Logging to stderr: `SUPINE_LOG` when set, else `-v`'s level, else `config_filter` (`supine run`'s `[log]
@@ -146,6 +150,7 @@ fn main() -> std::process::ExitCode {
         Command::Run(args) => run::run(args, cli.verbose),
         Command::Info(args) => info::run(args),
         Command::Wire(cmd) => wire::run(cmd),
+        Command::FrameBench(args) => frame_bench::run(args),
     };
     match result {
         Ok(()) if console::stderr_failed() => std::process::ExitCode::FAILURE,

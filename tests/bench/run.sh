@@ -1,16 +1,22 @@
 #!/usr/bin/env bash
 # Benchmarks of supine side by side with what users would pick instead (issue 14): criterion medians of every
 # per-frame stage, supine's ICP against Open3D and small_gicp, supine's joint forest against scikit-learn, and the
-# whole frame when the tracker's `frame` bench exists. Installs its Python peers into .venv
+# whole tracking frame (criterion `frame` bench; per-frame samples from `supine frame-bench`; peak RSS of
+# `supine demo`; instructions per frame on aarch64 and x86-64 from cross/count-instructions). Installs its Python
+# peers into .venv
 # (tests/bench/requirements.txt), writes the JSON report and regenerates docs/BENCHMARKS.md (+ PNG plots in
 # docs/bench/) from a full run; a --quick run writes its report under target/bench/quick/ and leaves docs/ alone.
 #
-#   tests/bench/run.sh [--quick] [--json FILE] [--instructions]
+#   tests/bench/run.sh [--quick] [--json FILE] [--instructions | --no-instructions]
 #
-#   --quick         small problem sets and short criterion runs (under 10 minutes on the 2-core machine)
-#   --json FILE     also copy the JSON report here (default: target/bench/{full,quick}/report.json)
-#   --instructions  also count instructions per frame of `supine demo` (cross/count-instructions; builds both
-#                   cross targets first, a few minutes)
+#   --quick            small problem sets and short criterion runs (under 10 minutes on the 2-core machine)
+#   --json FILE        also copy the JSON report here (default: target/bench/{full,quick}/report.json)
+#   --instructions     count instructions per frame (cross/count-instructions, every workload; builds both cross
+#                      targets first, a few minutes): the default of a full run, off for --quick
+#   --no-instructions  skip the count (frame_instructions_aarch64 is then null)
+#   --instructions-from FILE
+#                      take the counts from a `cross/count-instructions --json FILE` run made at the same commit
+#                      instead of counting again (the page names the file's commit)
 #
 # Single-threaded everywhere: the Rust sides run pinned to CPU 0 with one rayon thread, the Python peers with
 # OMP/BLAS at one thread and n_jobs=1.
@@ -20,13 +26,18 @@ root=$(pwd)
 
 quick=0
 json=""
-instructions=0
+instructions=-1
+insn_from=""
 while (($#)); do
     case $1 in
     --quick) quick=1 ;;
     --json) [[ $# -ge 2 ]] || { echo "tests/bench/run.sh: --json needs a file" >&2; exit 2; }; json=$2; shift ;;
     --instructions) instructions=1 ;;
-    -h | --help) sed -n '2,16p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
+    --no-instructions) instructions=0 ;;
+    --instructions-from)
+        [[ $# -ge 2 && -f $2 ]] || { echo "tests/bench/run.sh: --instructions-from needs an existing file" >&2; exit 2; }
+        insn_from=$(realpath "$2"); instructions=0; shift ;;
+    -h | --help) sed -n '2,22p' "$0" | sed 's/^# \{0,1\}//'; exit 0 ;;
     *) echo "tests/bench/run.sh: unknown argument '$1' (see --help)" >&2; exit 2 ;;
     esac
     shift
@@ -34,6 +45,7 @@ done
 
 mode=full
 ((quick)) && mode=quick
+((instructions >= 0)) || instructions=$((1 - quick))
 work=$root/target/bench/$mode
 rm -rf "$work"
 mkdir -p "$work"
@@ -82,8 +94,19 @@ if [[ -n $frame_bench ]]; then
     run cargo bench -q -p "$pkg" --bench frame --no-run
     run "${pin[@]}" cargo bench -q -p "$pkg" --bench frame -- "${crit[@]}" >"$work/frame.txt"
 fi
+# Per-frame samples of the tracker alone (the demo recording decoded first, init done, then one thread-CPU-time
+# and one wall-time sample per Tracker::process), and the peak RSS of the whole streaming pipeline (`supine demo`).
+if ((quick)); then frame_n=300; else frame_n=3000; fi
+run cargo build -q --release -p supine
+run "${pin[@]}" target/release/supine frame-bench --frames "$frame_n" --json "$work/frame_bench.json" >"$work/frame_bench.txt"
+if [[ -x /usr/bin/time ]]; then
+    run /usr/bin/time -f %M -o "$work/demo_rss_kib.txt" "${pin[@]}" target/release/supine demo >"$work/demo.txt"
+fi
 if ((instructions)); then
-    run cross/count-instructions --workload demo-frame --json "$work/instructions.json"
+    run cross/count-instructions --json "$work/instructions.json" >"$work/instructions.txt"
+elif [[ -n $insn_from ]]; then
+    cp "$insn_from" "$work/instructions.json"
+    commands+=("cross/count-instructions --json FILE  # counted separately, at commit $(python3 -c 'import json,sys; print(json.load(open(sys.argv[1])).get("commit"))' "$insn_from")")
 fi
 
 # 3. ICP: problems from held-out sequences, supine's registrations, then the peers on the same files.

@@ -18,6 +18,12 @@ impl MonotonicClock {
     }
 }
 
+/// CPU time the calling thread has used so far, ns (Linux `CLOCK_THREAD_CPUTIME_ID`): what a benchmark on a shared
+/// machine reads instead of wall time, since other processes' time slices do not count.
+pub fn thread_cpu_ns() -> u64 {
+    sys::thread_cpu_ns()
+}
+
 impl Clock for MonotonicClock {
     fn now(&self) -> Timestamp {
         Timestamp::from_us(self.now_us()).unwrap_or(Timestamp::from_us(Timestamp::MAX_US).unwrap_or_default())
@@ -36,5 +42,19 @@ mod tests {
         let b = c.now();
         assert!(b.since(a) >= 5_000, "{} µs across a 5 ms sleep", b.since(a));
         assert!(a.as_us() > 0);
+    }
+
+    #[test]
+    fn thread_cpu_time_counts_work_not_sleep() {
+        let a = thread_cpu_ns();
+        std::thread::sleep(std::time::Duration::from_millis(20));
+        let b = thread_cpu_ns();
+        let mut x = 0u64;
+        for i in 0..2_000_000u64 {
+            x = std::hint::black_box(x.wrapping_mul(31).wrapping_add(i));
+        }
+        let c = thread_cpu_ns();
+        assert!(b - a < 10_000_000, "a 20 ms sleep used {} ns of CPU", b - a);
+        assert!(c > b, "work used no CPU time ({x})");
     }
 }

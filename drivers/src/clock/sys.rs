@@ -1,4 +1,4 @@
-//! The one FFI call of the clock: `clock_gettime(CLOCK_MONOTONIC)`.
+//! The FFI calls of the clock: `clock_gettime(CLOCK_MONOTONIC)` and `clock_gettime(CLOCK_THREAD_CPUTIME_ID)`.
 //!
 //! Layout sources: `struct timespec` is `libc::timespec` (glibc `<time.h>`: `time_t tv_sec; long tv_nsec`, 16 bytes
 //! on x86-64 and aarch64); `CLOCK_MONOTONIC` is 1 in `<linux/time.h>` (`libc::CLOCK_MONOTONIC`). Both are checked
@@ -17,6 +17,19 @@ pub fn monotonic_us() -> u64 {
         libc::clock_gettime(libc::CLOCK_MONOTONIC, &mut ts);
     }
     ts.tv_sec.max(0) as u64 * 1_000_000 + ts.tv_nsec.max(0) as u64 / 1_000
+}
+
+/// `CLOCK_THREAD_CPUTIME_ID` in ns: CPU time the calling thread has used.
+pub fn thread_cpu_ns() -> u64 {
+    let mut ts = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: as above; the calling thread's CPU-time clock always exists on Linux.
+    unsafe {
+        libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut ts);
+    }
+    ts.tv_sec.max(0) as u64 * 1_000_000_000 + ts.tv_nsec.max(0) as u64
 }
 
 #[cfg(test)]

@@ -158,7 +158,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
     let t_train = Instant::now();
     let (forest, summary) = pool.install(|| train(&ds, &tcfg, progress))?;
     let train_s = t_train.elapsed().as_secs_f64();
-    let bytes = forest.to_file_bytes(&json!({"bench": "forest", "seed": cfg.seed}).to_string())?;
+    let bytes = forest.to_shipped_bytes(&json!({"bench": "forest", "seed": cfg.seed}).to_string())?;
     std::fs::write(out.join("supine.jfor"), &bytes)?;
     let view = ForestView::parse(&bytes).context("the quantised forest does not validate")?;
 

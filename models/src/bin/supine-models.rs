@@ -28,6 +28,15 @@ enum Command {
     /// Evaluate a model on held-out data (test split of a dataset, or generated sequences)
     #[command(subcommand)]
     Eval(EvalCommand),
+    /// Re-encode a model file in the current format version
+    #[command(subcommand)]
+    Convert(ConvertCommand),
+}
+
+#[derive(Subcommand)]
+enum ConvertCommand {
+    /// A joint forest (`JFOR` v1 or v2) as v2: refined leaves only, optionally a second file with the baseline
+    Joints(supine_models::forest::cli::ConvertJointsArgs),
 }
 
 #[derive(Subcommand)]
@@ -65,6 +74,7 @@ fn main() -> std::process::ExitCode {
         Command::Eval(EvalCommand::Tracking(a)) => return supine_models::eval::tracking::run(&a),
         Command::Train(TrainCommand::Joints(a)) => supine_models::forest::cli::run_train(&a),
         Command::Eval(EvalCommand::Joints(a)) => supine_models::forest::cli::run_eval(&a),
+        Command::Convert(ConvertCommand::Joints(a)) => supine_models::forest::cli::run_convert(&a),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,

@@ -32,6 +32,142 @@ pub fn sidecar_path(model: &Path) -> PathBuf {
     PathBuf::from(s)
 }
 
+/// The quantised baseline's path beside a refined-only forest file (`FILE.baseline`, git-ignored).
+pub fn baseline_path(model: &Path) -> PathBuf {
+    let mut s = model.as_os_str().to_owned();
+    s.push(".baseline");
+    PathBuf::from(s)
+}
+
+/// Arguments of `convert joints`.
+#[derive(Debug, clap::Args)]
+pub struct ConvertJointsArgs {
+    /// The forest to re-encode (`JFOR` version 1, or version 2).
+    #[arg(long = "in")]
+    pub input: PathBuf,
+    /// The version 2 file to write, refined leaves only (what the head computer ships).
+    #[arg(long)]
+    pub out: PathBuf,
+    /// Also write a version 2 file with the baseline leaves kept (for `eval joints`: name it OUT.baseline).
+    #[arg(long)]
+    pub baseline_out: Option<PathBuf>,
+}
+
+/// Run `convert joints`: re-encode a forest as `JFOR` version 2 and check that inference reads the same bits.
+pub fn run_convert(a: &ConvertJointsArgs) -> Result<()> {
+    use super::encode::{Quantised, V1Forest, check_same_inference};
+    let bytes = std::fs::read(&a.input).with_context(|| format!("reading {}", a.input.display()))?;
+    let q = match ForestView::parse(&bytes) {
+        Ok(v) => {
+            ensure!(
+                v.has_baseline() || a.baseline_out.is_none(),
+                "{} stores no baseline leaves",
+                a.input.display()
+            );
+            from_view(&v)
+        }
+        Err(supine_core::model_file::ModelFileError::UnsupportedKindVersion { found: 1, .. }) => {
+            Quantised::from_v1(&bytes).with_context(|| format!("reading {}", a.input.display()))?
+        }
+        Err(e) => return Err(anyhow::anyhow!("loading {}: {e}", a.input.display())),
+    };
+    let per_tree: Vec<u32> = q
+        .tree_start
+        .iter()
+        .enumerate()
+        .map(|(t, &s)| q.tree_start.get(t + 1).copied().unwrap_or(q.nodes.len() as u32) - s)
+        .collect();
+    let old = V1Forest::new(&q);
+    let mut outputs = vec![(a.out.clone(), false)];
+    if let Some(b) = &a.baseline_out {
+        outputs.push((b.clone(), true));
+    }
+    for (path, baseline) in outputs {
+        let mut part = q.clone();
+        if !baseline {
+            part.baseline = None;
+        }
+        let out = part.to_bytes()?;
+        let view = ForestView::parse(&out).context("the converted forest does not validate")?;
+        let exact = view.vote_shift() == 0;
+        if exact {
+            let n = check_same_inference(&old, &view, &per_tree, baseline)?;
+            eprintln!(
+                "checked: {} nodes and {n} leaf votes read back bit for bit",
+                q.nodes.len()
+            );
+        } else {
+            eprintln!(
+                "note: refined weights exceed ±2047 mm, stored in {} mm units (not bit-identical)",
+                1 << view.vote_shift()
+            );
+        }
+        std::fs::write(&path, &out).with_context(|| format!("writing {}", path.display()))?;
+        println!(
+            "wrote {} ({} bytes, JFOR v{}, {}) from {} ({} bytes)",
+            path.display(),
+            out.len(),
+            supine_core::forest::model::VERSION,
+            if baseline {
+                "refined and baseline leaves"
+            } else {
+                "refined leaves only"
+            },
+            a.input.display(),
+            bytes.len()
+        );
+    }
+    Ok(())
+}
+
+/// A version 2 file back in the writer's integer form.
+fn from_view(v: &ForestView<'_>) -> super::encode::Quantised {
+    use supine_core::forest::MODES;
+    use supine_core::forest::model::{ForestModel, Node};
+    const P: usize = SalientPoint::COUNT;
+    let starts = v.tree_starts();
+    let mut nodes = Vec::with_capacity(v.node_count());
+    for t in 0..v.tree_count() {
+        for i in 0..starts[t + 1] - starts[t] {
+            nodes.push(match v.node(t, i) {
+                Node::Leaf(l) => (None, l),
+                Node::Split { test, left } => (Some(test), left),
+            });
+        }
+    }
+    let mut refined_mm = Vec::new();
+    let mut rcon = Vec::new();
+    let mut bvot = Vec::new();
+    let mut bwgt = Vec::new();
+    for l in 0..v.leaf_count() as u32 {
+        for p in 0..P {
+            refined_mm.extend(v.refined_raw(l, p).map(|q| q << v.vote_shift()));
+            rcon.push(v.confidence_code(l, p));
+            for m in 0..MODES {
+                let b = v.baseline(l, p, m);
+                bvot.extend(b.offset.map(|x| (x * 1000.0).round() as i16));
+                bwgt.push((b.weight * 255.0).round() as u8);
+            }
+        }
+    }
+    let parm = (0..P)
+        .flat_map(|p| {
+            let q = v.params(p);
+            [q.refined_bandwidth_m, q.baseline_bandwidth_m, q.vote_length_m]
+        })
+        .collect();
+    super::encode::Quantised {
+        samples: v.samples_per_frame() as u32,
+        tree_start: starts[..v.tree_count()].to_vec(),
+        nodes,
+        refined_mm,
+        rcon,
+        baseline: v.has_baseline().then_some((bvot, bwgt)),
+        parm,
+        meta: v.meta().unwrap_or("").to_owned(),
+    }
+}
+
 /// Arguments of `train joints`.
 #[derive(Debug, clap::Args)]
 pub struct TrainJointsArgs {
@@ -225,7 +361,7 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "commit": commit(),
         "error_scale_m": forest.error_scale_m,
     });
-    let bytes = forest.to_file_bytes(&meta.to_string())?;
+    let bytes = forest.to_shipped_bytes(&meta.to_string())?;
     let view = ForestView::parse(&bytes).context("the written forest does not validate")?;
     if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
         std::fs::create_dir_all(dir)?;
@@ -295,6 +431,35 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
         "--samples must be 1..={}",
         supine_core::forest::MAX_SAMPLES
     );
+    // The baseline leaves: float from the sidecar, else quantised from the file itself or from FILE.baseline (a
+    // version 2 file with the same trees and the baseline kept, which `convert joints --baseline-out` writes).
+    let base_path = baseline_path(&path);
+    let base_bytes = match (&float, view.has_baseline()) {
+        (None, false) => std::fs::read(&base_path).ok(),
+        _ => None,
+    };
+    let base_view = match &base_bytes {
+        Some(b) => {
+            let v = ForestView::parse(b).with_context(|| format!("loading {}", base_path.display()))?;
+            ensure!(
+                v.has_baseline(),
+                "{} stores no baseline leaves",
+                base_path.display()
+            );
+            let starts = view.tree_starts();
+            let per_tree: Vec<u32> = starts.windows(2).map(|w| w[1] - w[0]).collect();
+            ensure!(
+                v.tree_starts() == starts,
+                "{} holds other trees than {}",
+                base_path.display(),
+                path.display()
+            );
+            super::encode::check_same_inference(&view, &v, &per_tree, false)
+                .with_context(|| format!("{} does not belong to {}", base_path.display(), path.display()))?;
+            Some(v)
+        }
+        None => None,
+    };
     let mut cands = Vec::new();
     match &float {
         Some(f) => {
@@ -310,16 +475,34 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
             });
         }
         None => {
-            eprintln!(
-                "note: no {} beside the forest: `baseline` uses the file's quantised baseline leaves and \
-                 `refined` equals `quantised`",
-                side_path.display()
-            );
-            cands.push(Candidate {
-                name: "baseline",
-                model: &view,
-                method: Method::Baseline,
-            });
+            let baseline: Option<&(dyn supine_core::forest::model::ForestModel + Sync)> =
+                if view.has_baseline() {
+                    Some(&view)
+                } else {
+                    base_view
+                        .as_ref()
+                        .map(|v| v as &(dyn supine_core::forest::model::ForestModel + Sync))
+                };
+            match baseline {
+                Some(b) => {
+                    eprintln!(
+                        "note: no {} beside the forest: `baseline` uses quantised baseline leaves and `refined` \
+                         equals `quantised`",
+                        side_path.display()
+                    );
+                    cands.push(Candidate {
+                        name: "baseline",
+                        model: b,
+                        method: Method::Baseline,
+                    });
+                }
+                None => eprintln!(
+                    "note: neither {} nor {} beside the forest, and the file ships refined leaves only: no \
+                     `baseline` row (`convert joints --baseline-out` writes one from a version 1 file)",
+                    side_path.display(),
+                    base_path.display()
+                ),
+            }
             cands.push(Candidate {
                 name: "refined",
                 model: &view,

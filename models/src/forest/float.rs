@@ -1,14 +1,14 @@
 //! The trainer's float forest ([`FloatForest`]: the grown trees with f32 leaves, both baseline and refined) and its
 //! quantisation into a `JFOR` model file (offsets and thresholds are already small integers; leaf votes become
-//! i16 mm, confidences u8 on a log scale, mode weights u8). The float forest runs through core's inference too (it implements
+//! mm, packed by [`super::encode`] into 12 bits, confidences u8 on a log scale, mode weights u8). The float forest runs through core's inference too (it implements
 //! [`ForestModel`]), so "refined" and "quantised" differ only by the quantisation.
 
+use super::encode::Quantised;
 use super::tree::Tree;
 use anyhow::{Result, ensure};
 use supine_core::forest::model::confidence_code;
-use supine_core::forest::model::{ForestModel, KIND, LEAF_BIT, LeafVote, Node, PointParams, VERSION, tags};
+use supine_core::forest::model::{ForestModel, LEAF_BIT, LeafVote, Node, PointParams};
 use supine_core::forest::{MAX_TREES, MODES};
-use supine_core::model_file::{ElemType, SectionData, encoded_len, write};
 use supine_core::salient::SalientPoint;
 
 const P: usize = SalientPoint::COUNT;
@@ -59,32 +59,36 @@ impl FloatForest {
         (-e * e).exp()
     }
 
-    /// Encode as a `JFOR` model file with `meta` (UTF-8 JSON) as provenance.
+    /// Encode as a `JFOR` model file with `meta` (UTF-8 JSON) as provenance, baseline leaves included (the file
+    /// evaluates both methods).
     pub fn to_file_bytes(&self, meta: &str) -> Result<Vec<u8>> {
+        self.quantised(meta, true)?.to_bytes()
+    }
+
+    /// Encode as the file the head computer ships: refined leaves only (its inference never reads the baseline;
+    /// `eval joints` takes the baseline from the float sidecar).
+    pub fn to_shipped_bytes(&self, meta: &str) -> Result<Vec<u8>> {
+        self.quantised(meta, false)?.to_bytes()
+    }
+
+    /// The forest in the file's integer units (votes mm, confidences as codes, mode weights x255).
+    pub fn quantised(&self, meta: &str, baseline: bool) -> Result<Quantised> {
         ensure!(
             !self.trees.is_empty() && self.trees.len() <= MAX_TREES,
             "forest must have 1..={MAX_TREES} trees"
         );
-        let nodes = self.node_count();
         let leaves = self.leaf_count();
-        let head: Vec<u32> = vec![self.trees.len() as u32, nodes as u32, leaves as u32, self.samples];
         let mut tree_start = Vec::new();
-        let mut split = Vec::with_capacity(nodes * 4);
-        let mut thrs = Vec::with_capacity(nodes);
-        let mut chld = Vec::with_capacity(nodes);
+        let mut nodes = Vec::with_capacity(self.node_count());
         let mut at = 0u32;
         for (t, tree) in self.trees.iter().enumerate() {
             tree_start.push(at);
             at += tree.nodes.len() as u32;
             for n in &tree.nodes {
                 if n.child & LEAF_BIT != 0 {
-                    split.extend([0i8; 4]);
-                    thrs.push(0i16);
-                    chld.push(LEAF_BIT | ((n.child & !LEAF_BIT) + self.leaf_base[t]));
+                    nodes.push((None, (n.child & !LEAF_BIT) + self.leaf_base[t]));
                 } else {
-                    split.extend([n.test.u[0], n.test.u[1], n.test.v[0], n.test.v[1]]);
-                    thrs.push(n.test.threshold_mm);
-                    chld.push(n.child);
+                    nodes.push((Some(n.test), n.child));
                 }
             }
         }
@@ -96,7 +100,7 @@ impl FloatForest {
         let mut bwgt = Vec::with_capacity(leaves * P * MODES);
         for l in 0..leaves {
             for p in 0..P {
-                rvot.extend(self.refined[l][p].map(mm));
+                rvot.extend(self.refined[l][p].map(|x| i32::from(mm(x))));
                 rcon.push(confidence_code(self.confidence(l, p)));
                 for m in 0..MODES {
                     let (o, w) = self.baseline[l][p][m];
@@ -109,35 +113,16 @@ impl FloatForest {
         for p in &self.params {
             parm.extend([p.refined_bandwidth_m, p.baseline_bandwidth_m, p.vote_length_m]);
         }
-        fn le<T: Copy, const N: usize>(v: &[T], f: impl Fn(T) -> [u8; N]) -> Vec<u8> {
-            v.iter().flat_map(|&x| f(x)).collect()
-        }
-        let b_head = le(&head, u32::to_le_bytes);
-        let b_tree = le(&tree_start, u32::to_le_bytes);
-        let b_split = le(&split, i8::to_le_bytes);
-        let b_thrs = le(&thrs, i16::to_le_bytes);
-        let b_chld = le(&chld, u32::to_le_bytes);
-        let b_rvot = le(&rvot, i16::to_le_bytes);
-        let b_bvot = le(&bvot, i16::to_le_bytes);
-        let b_parm = le(&parm, f32::to_le_bytes);
-        let sec = |tag, elem, bytes| SectionData { tag, elem, bytes };
-        let sections = [
-            sec(tags::HEAD, ElemType::U32, &b_head[..]),
-            sec(tags::TREE, ElemType::U32, &b_tree[..]),
-            sec(tags::SPLT, ElemType::I8, &b_split[..]),
-            sec(tags::THRS, ElemType::I16, &b_thrs[..]),
-            sec(tags::CHLD, ElemType::U32, &b_chld[..]),
-            sec(tags::RVOT, ElemType::I16, &b_rvot[..]),
-            sec(tags::RCON, ElemType::U8, &rcon[..]),
-            sec(tags::BVOT, ElemType::I16, &b_bvot[..]),
-            sec(tags::BWGT, ElemType::U8, &bwgt[..]),
-            sec(tags::PARM, ElemType::F32, &b_parm[..]),
-            sec(tags::META, ElemType::U8, meta.as_bytes()),
-        ];
-        let mut out = vec![0u8; encoded_len(&sections)];
-        let n = write(KIND, VERSION, &sections, &mut out).map_err(|e| anyhow::anyhow!("{e}"))?;
-        out.truncate(n);
-        Ok(out)
+        Ok(Quantised {
+            samples: self.samples,
+            tree_start,
+            nodes,
+            refined_mm: rvot,
+            rcon,
+            baseline: baseline.then_some((bvot, bwgt)),
+            parm,
+            meta: meta.to_owned(),
+        })
     }
 }
 

@@ -8,6 +8,7 @@
 pub mod chart;
 pub mod cli;
 pub mod data;
+pub mod encode;
 pub mod eval;
 pub mod float;
 pub mod leaves;
