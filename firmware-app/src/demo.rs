@@ -290,6 +290,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     row("probe mapping error", mm(&stats.probe_mm));
     row("probe distance error", mm(&stats.probe_distance_mm));
     row("budget overruns", stats.budget_overruns.to_string());
+    row("heap allocations after init", stats.allocations_summary());
     row(
         "packets",
         format!("{} ({} B on a serial line)", stats.packets, stats.serial_bytes),

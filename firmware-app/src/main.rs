@@ -4,6 +4,7 @@
 //! 2 on bad usage; errors name the bad argument or file. A closed stdout pipe (`| head`) ends quietly with 141, the
 //! status of a program killed by SIGPIPE; a failure to write stderr turns a success into exit 1.
 
+mod allocs;
 mod arm_track;
 mod calibrate;
 mod config;

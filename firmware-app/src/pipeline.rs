@@ -6,6 +6,7 @@
 //! (`supine_drivers::tracker_host`); per frame the tracker allocates nothing. The figures here (a latency per frame,
 //! a score per frame) are host-side bookkeeping, outside the tracker's frame budget.
 
+use crate::allocs;
 use std::collections::BTreeMap;
 use std::time::Duration;
 
@@ -66,6 +67,22 @@ pub struct RunStats {
     pub budget_overruns: u32,
     /// Frames the source could not decode (skipped, as the service does).
     pub corrupt: u64,
+    /// Heap allocations made while the tracker processed the frames after init (`None`: not counted).
+    pub tracker_allocations_after_init: Option<u64>,
+}
+
+impl RunStats {
+    /// The allocation figure for the summary tables of `demo` and `replay`.
+    pub fn allocations_summary(&self) -> String {
+        match self.tracker_allocations_after_init {
+            Some(n) => format!(
+                "{n} in the tracker over {} frames",
+                self.frames
+                    .saturating_sub(self.init_frames.map_or(self.frames, |i| i + 1))
+            ),
+            None => "not counted (--record/--view threads allocate beside the tracker)".to_string(),
+        }
+    }
 }
 
 /// Mean of a list, NaN when empty.
@@ -127,6 +144,7 @@ impl RunStats {
             "latency_ms_p50": num(percentile(&self.latency_us, 50.0) / 1000.0),
             "latency_ms_p99": num(percentile(&self.latency_us, 99.0) / 1000.0),
             "budget_overruns": self.budget_overruns,
+            "tracker_allocations_after_init": self.tracker_allocations_after_init,
             "corrupt_frames": self.corrupt,
             "packets": self.packets,
             "send_errors": self.send_errors,
@@ -148,6 +166,9 @@ pub struct PlayOptions<'a> {
     pub realtime: bool,
     /// Skip frames the source cannot decode (replay of a damaged file) instead of failing the run (the demo).
     pub skip_corrupt: bool,
+    /// Count the heap allocations made while the tracker runs (the allocator's counters are process-wide, so this
+    /// is off when other threads, the MCAP recorder or the live view, allocate beside it).
+    pub count_allocations: bool,
 }
 
 impl<'a> PlayOptions<'a> {
@@ -164,6 +185,7 @@ impl<'a> PlayOptions<'a> {
             tracker: tracker_config(rb),
             realtime: false,
             skip_corrupt: false,
+            count_allocations: true,
         }
     }
 }
@@ -263,7 +285,9 @@ pub fn play(
             Some(track) => track.at(frame.capture).copied(),
             None => true_arm.map(|a| arm_track::synthesise(&a, &mut arm_noise)),
         };
+        let allocs_before = allocs::count();
         let report = tracker.process(&frame, arm.as_ref(), &clock);
+        let allocated = allocs::count() - allocs_before;
         stats.frames += 1;
         stats.latency_us.push(report.times.total());
         *stats.states.entry(report.state.name()).or_insert(0) += 1;
@@ -272,6 +296,10 @@ pub fn play(
         }
         if stats.init_frames.is_some() && report.camera_from_torso.is_some() {
             stats.tracked_after_init += 1;
+        }
+        if opts.count_allocations && stats.init_frames.is_some_and(|n| stats.frames > n + 1) {
+            // After the frame that ended init (which builds the torso model into buffers allocated before).
+            *stats.tracker_allocations_after_init.get_or_insert(0) += allocated;
         }
         if let (Some(truth), Some(true_surface), Some(pose), Some(surface)) = (
             opts.truth.and_then(|t| t.frame(i)),

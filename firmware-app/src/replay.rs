@@ -181,6 +181,7 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     let opts = PlayOptions {
         realtime: args.realtime,
         skip_corrupt: true,
+        count_allocations: args.record.is_none() && args.view.is_none(),
         arm: arm.as_ref(),
         ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
     };
@@ -261,6 +262,7 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
         }
     }
     row("budget overruns", stats.budget_overruns.to_string());
+    row("heap allocations after init", stats.allocations_summary());
     crate::console::out(&format!("supine replay summary\n{table}"))?;
     if let Some(out) = json_out {
         let mut j = stats.json();

@@ -39,6 +39,8 @@ fn replay_records_the_demo_to_mcap_and_reports_json() {
         "no truth given: no accuracy figure"
     );
     assert!(report["states"]["initialising"].as_u64().unwrap() >= 1);
+    // The recorder's thread allocates beside the tracker: allocations are not counted then.
+    assert!(report["tracker_allocations_after_init"].is_null(), "{report}");
     assert!(
         text(&out.stdout).contains("12 frames to demo.mcap"),
         "{}",
@@ -191,6 +193,14 @@ fn replay_takes_arm_states_from_a_capture() {
         .as_f64()
         .expect("no probe error with --arm");
     assert!(probe.is_finite() && probe < 500.0, "{report}");
+    // No recorder or live view: the binary's counting allocator sees every allocation, and the per-frame path made
+    // none once init was over (the unit test in allocs.rs shows the counter moves on an allocation).
+    assert_eq!(report["tracker_allocations_after_init"], 0, "{report}");
+    assert!(
+        text(&out.stdout).contains("0 in the tracker over 20 frames"),
+        "{}",
+        text(&out.stdout)
+    );
 
     std::fs::write(dir.join("junk.cobs"), b"\x00garbage\x00").unwrap();
     let out = supine()
