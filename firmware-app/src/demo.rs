@@ -113,12 +113,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     };
     let png_out = match &args.png {
         Some(p) => {
-            if args.json.as_deref() == Some(p.as_path()) {
-                return Err(Failure::usage(format!(
-                    "--png and --json are both {}; give them different files",
-                    p.display()
-                )));
-            }
+            output::refuse_same_output("--png", p, "--json", args.json.as_deref())?;
             Some(Output::create("--png", p, &inputs)?)
         }
         None => None,
@@ -129,12 +124,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             others.push(("--json", j.as_path()));
         }
         output::refuse_overwriting("--sink", sink_path, &others)?;
-        if args.json.as_deref().is_some_and(|j| j == sink_path.as_path()) {
-            return Err(Failure::usage(format!(
-                "--sink and --json are both {}; give them different files",
-                sink_path.display()
-            )));
-        }
+        output::refuse_same_output("--sink", sink_path, "--json", args.json.as_deref())?;
     }
     let spec = SourceSpec::File { path: path.clone() };
     let mut src = source::open(&spec).map_err(|e| anyhow::anyhow!("opening the demo recording: {e}"))?;
