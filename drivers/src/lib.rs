@@ -5,6 +5,7 @@
 
 #[cfg(test)]
 mod c_probe;
+pub mod calib_host;
 pub mod clock;
 pub mod fault;
 #[cfg(feature = "freenect")]

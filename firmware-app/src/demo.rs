@@ -16,6 +16,7 @@ use supine_drivers::tracker_host::{MODEL_FILES, ModelFiles};
 
 use crate::arm_track::ArmTrack;
 use crate::failure::Failure;
+use crate::foxglove::outputs::{FoxgloveOutputs, Pace};
 use crate::foxglove::record_of;
 use crate::output::{self, Output};
 use crate::overlay_png;
@@ -50,6 +51,9 @@ pub struct DemoArgs {
     /// With --png: the frame to draw, counted from 0 (default: the last one played).
     #[arg(long, value_name = "N", requires = "png")]
     pub png_frame: Option<u32>,
+    /// Write every frame as Foxglove channels (depth, scene, transforms, packets) to this MCAP file.
+    #[arg(long, value_name = "OUT.mcap")]
+    pub record: Option<PathBuf>,
 }
 
 fn find_recording(args: &DemoArgs) -> Result<PathBuf, Failure> {
@@ -111,14 +115,17 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         Some(p) => Some(Output::create("--json", p, &inputs)?),
         None => None,
     };
+    let mut record_out = match &args.record {
+        Some(p) => {
+            output::refuse_same_output("--record", p, "--json", args.json.as_deref())?;
+            output::refuse_same_output("--record", p, "--png", args.png.as_deref())?;
+            Some(Output::create("--record", p, &inputs)?)
+        }
+        None => None,
+    };
     let png_out = match &args.png {
         Some(p) => {
-            if args.json.as_deref() == Some(p.as_path()) {
-                return Err(Failure::usage(format!(
-                    "--png and --json are both {}; give them different files",
-                    p.display()
-                )));
-            }
+            output::refuse_same_output("--png", p, "--json", args.json.as_deref())?;
             Some(Output::create("--png", p, &inputs)?)
         }
         None => None,
@@ -129,12 +136,7 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             others.push(("--json", j.as_path()));
         }
         output::refuse_overwriting("--sink", sink_path, &others)?;
-        if args.json.as_deref().is_some_and(|j| j == sink_path.as_path()) {
-            return Err(Failure::usage(format!(
-                "--sink and --json are both {}; give them different files",
-                sink_path.display()
-            )));
-        }
+        output::refuse_same_output("--sink", sink_path, "--json", args.json.as_deref())?;
     }
     let spec = SourceSpec::File { path: path.clone() };
     let mut src = source::open(&spec).map_err(|e| anyhow::anyhow!("opening the demo recording: {e}"))?;
@@ -160,8 +162,17 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
     };
     let opts = PlayOptions {
         arm: arm.as_ref(),
+        count_allocations: record_out.is_none(),
         ..PlayOptions::new(args.frames.unwrap_or(u32::MAX), truth.as_ref())
     };
+    // The demo records every frame (the loop waits for the writer), as replay does.
+    let mut outputs = FoxgloveOutputs::new(
+        record_out.as_mut().map(Output::take_file),
+        None,
+        truth.as_ref().map(|t| t.robot_base_from_camera),
+        Pace::Lossless,
+    )
+    .map_err(|e| anyhow::anyhow!("--record: {e}"))?;
     let intrinsics = src.intrinsics();
     let mut picture = None;
     let mut states = Vec::new();
@@ -178,6 +189,9 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         states.push(v.report.state);
         if png_out.is_some() && wanted {
             picture = Some(overlay_png::render(&record_of(v, intrinsics)));
+        }
+        if record_out.is_some() {
+            outputs.frame(&record_of(v, intrinsics));
         }
         if s.frames % 10 == 0 || s.frames == 1 {
             let err = s
@@ -218,8 +232,18 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
             sink_failure = Some(format!("--sink {}: {e}", link.describe()));
         }
     }
+    let recorded = match outputs.finish() {
+        Ok(r) => r.recorded,
+        Err(e) => {
+            let kept = record_out.map(Output::abandon).unwrap_or(None);
+            return Err(output::with_partial(anyhow::anyhow!("--record: {e}"), kept).into());
+        }
+    };
     if stats.frames == 0 {
         return Err(anyhow::anyhow!("{} holds no frames", path.display()).into());
+    }
+    if let Some(out) = record_out {
+        out.commit()?;
     }
     let wall = started.elapsed().as_secs_f64();
     let p50 = pipeline::percentile(&stats.latency_us, 50.0) / 1000.0;
@@ -252,6 +276,9 @@ pub fn run(args: DemoArgs) -> Result<(), Failure> {
         },
     );
     row("states (frames)", stats.states_line());
+    if let Some(p) = &args.record {
+        row("recorded", format!("{recorded} frames to {}", p.display()));
+    }
     let recovery = truth.as_ref().and_then(|t| t.full_occlusion).map(|e| {
         // Frames from the end of the park until the tracker tracks (not coasts) again.
         let back = states

@@ -48,6 +48,23 @@ pub struct Output {
     file: Option<File>,
 }
 
+/// Refuse two outputs named by the same path (`flag` at `path`, `other_flag` at `other` when given): a usage
+/// error, before anything is opened.
+pub fn refuse_same_output(
+    flag: &str,
+    path: &Path,
+    other_flag: &str,
+    other: Option<&Path>,
+) -> Result<(), Failure> {
+    if other == Some(path) {
+        return Err(Failure::usage(format!(
+            "{flag} and {other_flag} are both {}; give them different files",
+            path.display()
+        )));
+    }
+    Ok(())
+}
+
 impl Output {
     /// Check `target` (the value of `flag`) against `inputs` and open a temporary file beside it. Fails now if the
     /// target is a directory or its directory is not writable.
@@ -181,5 +198,21 @@ pub fn with_partial(err: anyhow::Error, kept: Option<PathBuf>) -> anyhow::Error 
     match kept {
         Some(p) => anyhow::anyhow!("{err:#}; the partial output is kept in {}", p.display()),
         None => err,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::refuse_same_output;
+    use std::path::Path;
+
+    #[test]
+    fn two_outputs_on_one_path_are_a_usage_error_naming_both() {
+        let p = Path::new("out/r.json");
+        let e = refuse_same_output("--png", p, "--json", Some(p)).unwrap_err();
+        let msg = format!("{e}");
+        assert!(msg.contains("--png and --json are both out/r.json"), "{msg}");
+        assert!(refuse_same_output("--png", p, "--json", Some(Path::new("other.json"))).is_ok());
+        assert!(refuse_same_output("--png", p, "--json", None).is_ok());
     }
 }

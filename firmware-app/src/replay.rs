@@ -115,12 +115,7 @@ pub fn run(args: ReplayArgs) -> Result<(), Failure> {
     };
     let json_out = match &args.json {
         Some(p) => {
-            if args.record.as_deref() == Some(p.as_path()) {
-                return Err(Failure::usage(format!(
-                    "--record and --json are both {}; give them different files",
-                    p.display()
-                )));
-            }
+            output::refuse_same_output("--record", p, "--json", args.record.as_deref())?;
             Some(Output::create("--json", p, &inputs)?)
         }
         None => None,

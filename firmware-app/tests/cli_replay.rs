@@ -1,4 +1,4 @@
-//! `supine replay`: the committed recording to MCAP, the live view's flags, and the errors a user meets (a topic
+//! `supine replay` (and `supine demo --record`): the committed recording to MCAP, the live view's flags, and the errors a user meets (a topic
 //! for an .oni file, an MCAP without depth images, an output over the input, a missing file).
 
 mod common;
@@ -214,5 +214,48 @@ fn replay_takes_arm_states_from_a_capture() {
     assert!(
         err.contains("--arm") && err.contains("junk.cobs") && err.contains("no arm state"),
         "{err}"
+    );
+}
+
+#[test]
+fn demo_records_its_frames_to_mcap() {
+    let dir = scratch("demo-record");
+    let out = supine()
+        .current_dir(&dir)
+        .args([
+            "demo",
+            "--frames",
+            "12",
+            "--record",
+            "demo.mcap",
+            "--json",
+            "r.json",
+        ])
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{}", text(&out.stderr));
+    let mcap = std::fs::read(dir.join("demo.mcap")).unwrap();
+    assert_eq!(&mcap[..8], b"\x89MCAP0\r\n");
+    assert_eq!(
+        &mcap[mcap.len() - 8..],
+        b"\x89MCAP0\r\n",
+        "a finished file ends with the magic"
+    );
+    let table = text(&out.stdout);
+    assert!(table.contains("12 frames to demo.mcap"), "{table}");
+    // The recorder's thread allocates beside the tracker: not counted then.
+    assert!(table.contains("not counted"), "{table}");
+
+    // The recording may not be written over the JSON report.
+    let again = supine()
+        .current_dir(&dir)
+        .args(["demo", "--frames", "2", "--record", "r.json", "--json", "r.json"])
+        .output()
+        .unwrap();
+    assert_eq!(again.status.code(), Some(2), "{}", text(&again.stderr));
+    assert!(
+        text(&again.stderr).contains("--record and --json are both r.json"),
+        "{}",
+        text(&again.stderr)
     );
 }

@@ -11,14 +11,13 @@
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
 
-use supine_core::calib::start::{CANDIDATES_PER_POSE, MAX_POSES};
+use supine_core::calib::start::MAX_POSES;
 use supine_core::calib::{
-    ArmHistory, ArmSample, Candidate, Match, Pair, PoseObservation, Session, SessionConfig, SolveOptions,
-    StartBuffers, StartOptions, StartScratch, rough_extrinsic, solve,
+    ArmHistory, ArmSample, Match, Pair, PoseObservation, Session, SessionConfig, SolveOptions, solve,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::geometry::{Isometry3, Point3};
+use supine_core::geometry::Isometry3;
 use supine_core::time::Timestamp;
 use supine_drivers::link::{self, Link};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
@@ -185,50 +184,13 @@ pub fn collect(
         .filter_map(|p| kept.iter().find(|f| f.pose == p))
         .collect();
     let rough = {
-        let n = first.len();
-        let mut background = vec![0u16; w as usize * h as usize];
-        let np = supine_core::planes::scratch_points(w as usize, h as usize, 6);
-        let (mut plane_points, mut plane_labels) = (vec![Point3::origin(); np], vec![0u8; np]);
-        let blank = Candidate {
-            pose: 0,
-            tip_camera: Point3::origin(),
-            tip_height_m: 0.0,
-        };
-        let mut candidates = vec![blank; n * CANDIDATES_PER_POSE];
-        let mut chosen = vec![None; n];
-        let blank_pair = Pair {
-            robot_base: Point3::origin(),
-            camera: Point3::origin(),
-        };
-        let mut pairs = vec![blank_pair; n * CANDIDATES_PER_POSE];
-        let (mut residuals, mut inliers) = (
-            vec![0.0; n * CANDIDATES_PER_POSE],
-            vec![false; n * CANDIDATES_PER_POSE],
-        );
-        let mut scratch: Box<StartScratch<16384>> = Box::default();
         let arm_at: Vec<ArmSample> = first.iter().map(|f| pose_tips[f.pose]).collect();
         let frame = |i: usize| {
             DepthFrame::new(&first[i].depth, w, h, first[i].capture, i as u32)
                 .expect("kept frames have the source's size")
         };
-        rough_extrinsic(
-            frame,
-            &arm_at,
-            k,
-            &StartOptions::default(),
-            &mut scratch,
-            StartBuffers {
-                background: &mut background,
-                plane_points: &mut plane_points,
-                plane_labels: &mut plane_labels,
-                candidates: &mut candidates,
-                chosen: &mut chosen,
-                pairs: &mut pairs,
-                residuals: &mut residuals,
-                inliers: &mut inliers,
-            },
-        )
-        .map_err(|e| anyhow::anyhow!("no extrinsic: {e}"))?
+        supine_drivers::calib_host::guess_free_start(frame, &arm_at, k)
+            .map_err(|e| anyhow::anyhow!("no extrinsic: {e}"))?
     };
     eprintln!(
         "guess-free start: a tip in {} of {poses} poses, rough extrinsic from {} (rms residual {:.1} mm)",

@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
 use supine_core::calib::{
-    ArmHistory, ArmSample, Candidate, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats,
-    Solution, SolveOptions, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic, solve,
+    ArmHistory, ArmSample, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats, Solution,
+    SolveOptions, StartError, solve,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -135,56 +135,15 @@ pub fn guess_free_start(
     arms: &[ArmSample],
     k: &Intrinsics,
 ) -> Result<(Solution, usize), StartError> {
-    let n = arms.len();
     let (w, h) = (k.width, k.height);
-    let mut background = vec![0u16; w as usize * h as usize];
-    let np = supine_core::planes::scratch_points(w as usize, h as usize, 6);
-    let (mut plane_points, mut plane_labels) = (vec![Point3::origin(); np], vec![0u8; np]);
-    let mut candidates = vec![
-        Candidate {
-            pose: 0,
-            tip_camera: Point3::origin(),
-            tip_height_m: 0.0
-        };
-        n * supine_core::calib::start::CANDIDATES_PER_POSE
-    ];
-    let mut chosen = vec![None; n];
-    let mut pairs = vec![
-        Pair {
-            robot_base: Point3::origin(),
-            camera: Point3::origin()
-        };
-        n * supine_core::calib::start::CANDIDATES_PER_POSE
-    ];
-    let (mut residuals, mut inliers) = (
-        vec![0.0; n * supine_core::calib::start::CANDIDATES_PER_POSE],
-        vec![false; n * supine_core::calib::start::CANDIDATES_PER_POSE],
-    );
-    let mut scratch: Box<StartScratch<16384>> = Box::default();
+    if frames.len() < arms.len() || frames.iter().any(|f| f.len() != w as usize * h as usize) {
+        return Err(StartError::BufferTooShort);
+    }
     let frame = |i: usize| {
         DepthFrame::new(&frames[i], w, h, Timestamp::default(), i as u32)
             .expect("keyframes have the frame size")
     };
-    if frames.iter().any(|f| f.len() != w as usize * h as usize) {
-        return Err(StartError::BufferTooShort);
-    }
-    rough_extrinsic(
-        frame,
-        arms,
-        k,
-        &StartOptions::default(),
-        &mut scratch,
-        StartBuffers {
-            background: &mut background,
-            plane_points: &mut plane_points,
-            plane_labels: &mut plane_labels,
-            candidates: &mut candidates,
-            chosen: &mut chosen,
-            pairs: &mut pairs,
-            residuals: &mut residuals,
-            inliers: &mut inliers,
-        },
-    )
+    supine_drivers::calib_host::guess_free_start(frame, arms, k)
 }
 
 fn reader_intrinsics(_reader: &OniReader) -> Intrinsics {
