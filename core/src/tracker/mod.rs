@@ -42,7 +42,6 @@ use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
 use crate::forest::sample::{Clip, PixelRect};
 use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
-use crate::icp::IcpParams;
 use crate::planes::{self, BedScene, PlaneConfig};
 use crate::probe::{self, ProbeMapping};
 use crate::rng::mix_seed;
@@ -719,15 +718,8 @@ impl<'m, 's> Tracker<'m, 's> {
                         m += 1;
                     }
                 }
-                let params = FitParams::combined(
-                    IcpParams {
-                        // The shape fit keeps every pair, as it was chosen with (the tracker's margin is for
-                        // the rigid fit only).
-                        behind_margin_m: f32::INFINITY,
-                        ..torso_icp::icp_params(&self.cfg.icp, bed.mattress)
-                    },
-                    &coeffs[..m],
-                );
+                let params =
+                    FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed.mattress), &coeffs[..m]);
                 if let Ok(r) = fit::fit_shape(
                     &body,
                     frame,
@@ -843,14 +835,8 @@ impl<'m, 's> Tracker<'m, 's> {
                     }
                 }
             }
-            let params = torso_icp::icp_params(&self.cfg.icp, t.bed.mattress);
-            // Acquisition starts may be several centimetres off: they keep the pairs behind the model, which pull
-            // a start in from afar; the temporal start drops them, so the model's edges do not slide onto the
-            // patient's arms or the bed (which turned the torso by 10-15° within a few frames).
-            let acquire_params = IcpParams {
-                behind_margin_m: f32::INFINITY,
-                ..params
-            };
+            let acquire_params = torso_icp::icp_params(&self.cfg.icp, t.bed.mattress);
+            let temporal_params = torso_icp::temporal_params(&self.cfg.icp, t.bed.mattress);
             let icp_cfg = self.cfg.icp;
             let from_prior =
                 |i: usize| i == 0 && prior_pose.is_some() && variant == Variant::ForestIcpFeedback;
@@ -863,7 +849,11 @@ impl<'m, 's> Tracker<'m, 's> {
                     self.scratch.torso_normals,
                     *start,
                     &icp_cfg,
-                    if from_prior(i) { &params } else { &acquire_params },
+                    if from_prior(i) {
+                        &temporal_params
+                    } else {
+                        &acquire_params
+                    },
                     &self.cfg.budget,
                     if prior_pose.is_none() {
                         icp_cfg.acquire_min_iterations

@@ -132,13 +132,23 @@ impl TorsoFit {
     }
 }
 
-/// The association parameters of the fit for a mattress plane.
+/// The association parameters of the fit for a mattress plane, keeping every pair behind the model (acquisition
+/// starts and the shape fit); the temporal start adds `behind_margin_m` ([`temporal_params`]).
 pub fn icp_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> IcpParams {
     IcpParams {
         max_distance_m: cfg.max_distance_m,
         occluder_margin_m: cfg.occluder_margin_m,
-        behind_margin_m: cfg.behind_margin_m,
         ..IcpParams::new(mattress)
+    }
+}
+
+/// [`icp_params`] for the fit from the temporal start: pairs whose observed surface lies well behind the model are
+/// dropped, so the model's edges do not slide onto the patient's arms or the bed (which turned the torso by 10-15°
+/// within a few frames); a start several centimetres off (acquisition) needs those pairs to be pulled in.
+pub fn temporal_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> IcpParams {
+    IcpParams {
+        behind_margin_m: cfg.behind_margin_m,
+        ..icp_params(cfg, mattress)
     }
 }
 
