@@ -1,10 +1,11 @@
-//! Host-side buffers for the guess-free calibration start (`supine_core::calib::rough_extrinsic`): `supine
-//! calibrate` and `supine-models eval calibration` both allocate them here, once per solve (no per-frame cost).
+//! Host-side buffers for calibration's core solvers (the guess-free start, `supine_core::calib::rough_extrinsic`,
+//! and the pose solve, `supine_core::calib::solve`): `supine calibrate` and `supine-models eval calibration` both
+//! allocate them here, once per solve (no per-frame cost).
 
 use supine_core::calib::start::CANDIDATES_PER_POSE;
 use supine_core::calib::{
-    ArmSample, Candidate, Pair, Solution, StartBuffers, StartError, StartOptions, StartScratch,
-    rough_extrinsic,
+    ArmSample, Candidate, Pair, PoseObservation, Solution, SolveError, SolveOptions, StartBuffers,
+    StartError, StartOptions, StartScratch, rough_extrinsic, solve,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -57,4 +58,22 @@ pub fn guess_free_start<'f>(
             inliers: &mut inliers,
         },
     )
+}
+
+/// Solve `robot_base_from_camera` from dwell-averaged poses with `options`; the per-pose residuals (metres) and
+/// whether each pose was an inlier come back with the solution.
+pub fn solve_poses(
+    poses: &[PoseObservation],
+    options: &SolveOptions,
+) -> Result<(Solution, Vec<f32>, Vec<bool>), SolveError> {
+    let pairs: Vec<Pair> = poses
+        .iter()
+        .map(|p| Pair {
+            robot_base: p.robot_base,
+            camera: p.camera,
+        })
+        .collect();
+    let (mut residuals, mut inliers) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
+    let s = solve(&pairs, options, &mut residuals, &mut inliers)?;
+    Ok((s, residuals, inliers))
 }

@@ -24,8 +24,8 @@ use std::time::{Duration, Instant};
 
 use clap::Args;
 use supine_core::calib::{
-    ArmSample, FrameOutcome, Pair, PoseObservation, Session, SessionConfig, Solution, SolveOptions,
-    WARN_CONDITION, solve, unit_quaternion_wxyz,
+    ArmSample, FrameOutcome, PoseObservation, Session, SessionConfig, Solution, SolveOptions, WARN_CONDITION,
+    unit_quaternion_wxyz,
 };
 use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use supine_drivers::link::{self, FileMode, LinkOptions, LinkSpec};
@@ -92,16 +92,9 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
         write_atomic(path, pairs_jsonl(&poses).as_bytes())?;
         eprintln!("pairs written to {}", path.display());
     }
-    let pairs: Vec<Pair> = poses
-        .iter()
-        .map(|p| Pair {
-            robot_base: p.robot_base,
-            camera: p.camera,
-        })
-        .collect();
-    let (mut residuals, mut inliers) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
-    let solution = solve(&pairs, &SolveOptions::default(), &mut residuals, &mut inliers)
-        .map_err(|e| anyhow::anyhow!("no extrinsic: {e}"))?;
+    let (solution, residuals, inliers) =
+        supine_drivers::calib_host::solve_poses(&poses, &SolveOptions::default())
+            .map_err(|e| anyhow::anyhow!("no extrinsic: {e}"))?;
     for (i, (r, ok)) in residuals.iter().zip(&inliers).enumerate() {
         eprintln!(
             "pose {:>2}: residual {:>6.2} mm{}",
@@ -113,7 +106,7 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     eprintln!(
         "solved from {} of {} poses: rms residual {:.2} mm, max {:.2} mm, condition {:.1}",
         solution.inliers,
-        pairs.len(),
+        poses.len(),
         solution.rms_residual_m * 1000.0,
         solution.max_residual_m * 1000.0,
         solution.condition
@@ -124,7 +117,7 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
             solution.condition
         );
     }
-    let text = extrinsic_toml(&solution, pairs.len());
+    let text = extrinsic_toml(&solution, poses.len());
     match &args.out {
         Some(path) => {
             write_atomic(path, text.as_bytes())?;

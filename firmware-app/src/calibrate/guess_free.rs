@@ -13,7 +13,7 @@ use std::time::{Duration, Instant};
 
 use supine_core::calib::start::MAX_POSES;
 use supine_core::calib::{
-    ArmHistory, ArmSample, Match, Pair, PoseObservation, Session, SessionConfig, SolveOptions, solve,
+    ArmHistory, ArmSample, Match, PoseObservation, Session, SessionConfig, SolveOptions,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -201,19 +201,11 @@ pub fn collect(
     // Two passes of the session over the kept frames: the rough prior, then the first pass's solution.
     let config = SessionConfig::new(rough.0.robot_base_from_camera);
     let pass1 = replay(&kept, &arms, k, config, poses)?;
-    let pairs: Vec<Pair> = pass1
-        .iter()
-        .map(|p| Pair {
-            robot_base: p.robot_base,
-            camera: p.camera,
-        })
-        .collect();
-    let (mut r, mut ok) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
     let lenient = SolveOptions {
         max_rms_residual_m: f32::INFINITY,
         ..SolveOptions::default()
     };
-    let first_solution = solve(&pairs, &lenient, &mut r, &mut ok)
+    let (first_solution, _, _) = supine_drivers::calib_host::solve_poses(&pass1, &lenient)
         .map_err(|e| anyhow::anyhow!("no extrinsic: first pass after the guess-free start: {e}"))?;
     eprintln!(
         "first pass: {} poses, {} agree (rms residual {:.1} mm)",

@@ -13,8 +13,8 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::calib::solve::{rotation_error_deg, translation_error_m};
 use supine_core::calib::{
-    ArmHistory, ArmSample, Match, Pair, PoseObservation, Session, SessionConfig, SessionStats, Solution,
-    SolveOptions, StartError, solve,
+    ArmHistory, ArmSample, Match, PoseObservation, Session, SessionConfig, SessionStats, Solution,
+    SolveOptions, StartError,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -157,19 +157,11 @@ pub fn solve_poses(
     poses: &[PoseObservation],
     lenient: bool,
 ) -> Result<Solution, supine_core::calib::SolveError> {
-    let pairs: Vec<Pair> = poses
-        .iter()
-        .map(|p| Pair {
-            robot_base: p.robot_base,
-            camera: p.camera,
-        })
-        .collect();
-    let (mut r, mut ok) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
     let mut options = SolveOptions::default();
     if lenient {
         options.max_rms_residual_m = f32::INFINITY;
     }
-    solve(&pairs, &options, &mut r, &mut ok)
+    supine_drivers::calib_host::solve_poses(poses, &options).map(|(s, _, _)| s)
 }
 
 /// The result of one sequence at one pose count.
