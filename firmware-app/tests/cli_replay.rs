@@ -9,6 +9,17 @@ fn text(b: &[u8]) -> String {
     String::from_utf8_lossy(b).into_owned()
 }
 
+/// The file is an MCAP recording that was finished: the magic at both ends.
+fn assert_finished_mcap(path: &std::path::Path) {
+    let mcap = std::fs::read(path).unwrap();
+    assert_eq!(&mcap[..8], b"\x89MCAP0\r\n");
+    assert_eq!(
+        &mcap[mcap.len() - 8..],
+        b"\x89MCAP0\r\n",
+        "a finished file ends with the magic"
+    );
+}
+
 #[test]
 fn replay_records_the_demo_to_mcap_and_reports_json() {
     let dir = scratch("replay-record");
@@ -20,13 +31,7 @@ fn replay_records_the_demo_to_mcap_and_reports_json() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let mcap = std::fs::read(dir.join("demo.mcap")).unwrap();
-    assert_eq!(&mcap[..8], b"\x89MCAP0\r\n");
-    assert_eq!(
-        &mcap[mcap.len() - 8..],
-        b"\x89MCAP0\r\n",
-        "a finished file ends with the magic"
-    );
+    assert_finished_mcap(&dir.join("demo.mcap"));
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.join("r.json")).unwrap()).unwrap();
     assert_eq!(report["frames"], 12);
@@ -234,13 +239,7 @@ fn demo_records_its_frames_to_mcap() {
         .output()
         .unwrap();
     assert!(out.status.success(), "{}", text(&out.stderr));
-    let mcap = std::fs::read(dir.join("demo.mcap")).unwrap();
-    assert_eq!(&mcap[..8], b"\x89MCAP0\r\n");
-    assert_eq!(
-        &mcap[mcap.len() - 8..],
-        b"\x89MCAP0\r\n",
-        "a finished file ends with the magic"
-    );
+    assert_finished_mcap(&dir.join("demo.mcap"));
     let table = text(&out.stdout);
     assert!(table.contains("12 frames to demo.mcap"), "{table}");
     // The recorder's thread allocates beside the tracker: not counted then.
