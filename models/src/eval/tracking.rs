@@ -55,6 +55,10 @@ pub struct TrackingEvalArgs {
     /// tracking error from shape error.
     #[arg(long)]
     pub true_shape: bool,
+    /// The tracker's `search_shape_start` (off by default): the shape refinement starts from a rigid registration
+    /// of the estimated torso instead of the forest's points.
+    #[arg(long)]
+    pub search_shape_start: bool,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -171,6 +175,7 @@ pub fn run_variant(
     variant: Variant,
     truth_torso: &OwnedTorso,
     true_shape: bool,
+    search_shape_start: bool,
     budget_ms: f32,
 ) -> Result<(Vec<FrameScore>, Value)> {
     let k = Intrinsics::KINECT_V1;
@@ -181,6 +186,7 @@ pub fn run_variant(
     };
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
     cfg.budget.frame_us = (budget_ms * 1000.0) as u32;
+    cfg.search_shape_start = search_shape_start;
     if true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
         for (o, s) in z.iter_mut().zip(&seq.meta.shape) {
@@ -331,6 +337,9 @@ pub fn run_variant(
         "latency_ms_p99": percentile(&mut ms, 0.99),
         "budget_overruns": c.overruns,
         "icp_cuts": c.icp_cuts,
+        // The init phase's shape (σ units) beside the truth: the largest term of the torso error.
+        "shape_estimate": tracker.shape().map(|z| z.to_vec()),
+        "shape_true": &seq.meta.shape,
     });
     Ok((scores, summary))
 }
@@ -429,6 +438,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
                 *variant,
                 &truth_torso,
                 args.true_shape,
+                args.search_shape_start,
                 args.budget_ms,
             )?;
             eprintln!(

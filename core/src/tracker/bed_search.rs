@@ -1,0 +1,176 @@
+//! Acquisition starts laid on the bed: when the tracker has no pose, the forest's torso frame can be 15-25 cm and
+//! 40-60° off (a view or a body the forest handles badly), too far for ICP to converge. A patient lying on the bed
+//! is constrained though: chest up, the body axis along the bed, the back on the mattress. So besides the forest's
+//! own pose, the acquisition tries the model lying flat on the mattress along the bed (toward the end the forest's
+//! shoulders point at), on a grid around the forest's hip centre, screens each start with a few ICP iterations and
+//! refines the best ones fully.
+//!
+//! Cost per acquiring frame: [`STARTS`] screening fits of [`SCREEN_ITERATIONS`] ICP iterations (about 1-2 ms with
+//! the default model); nothing while tracking; nothing allocates.
+
+use crate::geometry::{Isometry3, Matrix3, Plane, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use crate::planes::BedScene;
+use heapless::Vec;
+
+/// Offsets of the grid along the bed from the forest's hip centre, metres (the forest's worst error is along the
+/// body: the torso slides along itself).
+pub const ALONG_M: [f32; 5] = [-0.16, -0.08, 0.0, 0.08, 0.16];
+/// Offsets of the grid across the bed, metres.
+pub const ACROSS_M: [f32; 3] = [-0.08, 0.0, 0.08];
+/// Number of grid starts per surface the patient may lie on.
+pub const STARTS: usize = ALONG_M.len() * ACROSS_M.len();
+/// ICP iterations a grid start gets before the best are chosen.
+pub const SCREEN_ITERATIONS: u8 = 3;
+/// Grid starts refined fully after the screening.
+pub const KEEP: usize = 2;
+
+/// How far the torso frame's origin (the hip centre) lies above the lowest point of the torso model: the origin's
+/// height over the mattress when the model lies flat on it.
+pub fn back_depth_m(torso_vertices: &[Point3]) -> f32 {
+    let lowest = torso_vertices.iter().map(|v| v.z).fold(0.0f32, f32::min);
+    -lowest
+}
+
+/// The grid starts around `forest` (`camera_from_torso`): the model lying on the mattress with its back `back_m`
+/// below the hip centre, the body axis along the bed toward the end the forest's shoulders point at; and, when the
+/// bed's head section is raised, the model lying on it as well, its body axis up the slope.
+pub fn grid_starts(forest: &Isometry3, bed: &BedScene, back_m: f32) -> Vec<Isometry3, { 2 * STARTS }> {
+    let camera_from_bed = bed.volume.bed_from_camera.inverse();
+    let across = camera_from_bed.rotation * Vector3::x();
+    let forest_axis = forest.rotation * Vector3::y();
+    let hip = Point3::from(forest.translation.vector);
+    let mut out = Vec::new();
+    let up = bed.mattress.normal();
+    let mut lie_on = |plane: &Plane, toward: Vector3| {
+        let z = plane.normal();
+        let Some(x) = (across - z * across.dot(&z)).try_normalize(1e-6) else {
+            return;
+        };
+        let (x, y) = {
+            let y = z.cross(&x);
+            if y.dot(&toward) >= 0.0 { (x, y) } else { (-x, -y) }
+        };
+        let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+            Matrix3::from_columns(&[x, y, z]),
+        ));
+        let centre = hip.coords - z * (plane.signed_distance(&hip) - back_m);
+        for along in ALONG_M {
+            for side in ACROSS_M {
+                let at = centre + y * along + x * side;
+                let _ = out.push(Isometry3::from_parts(Translation3::from(at), rotation));
+            }
+        }
+    };
+    lie_on(&bed.mattress, forest_axis);
+    if let Some(head) = bed.head_section {
+        // The head lies up the raised section: the body axis rises away from the mattress.
+        lie_on(&head, up);
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::planes::VolumeOfInterest;
+
+    fn bed() -> BedScene {
+        // Camera 1.5 m above the mattress looking down; bed frame x = camera x, y = -camera y, z = -camera z.
+        let bed_from_camera = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 1.5),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI),
+        );
+        BedScene {
+            mattress: Plane::through(Vector3::new(0.0, 0.0, 1.5), Vector3::new(0.0, 0.0, -1.0)),
+            floor: None,
+            head_section: None,
+            volume: VolumeOfInterest {
+                bed_from_camera,
+                min: [-0.5, -1.0, 0.0],
+                max: [0.5, 1.0, 0.6],
+                head_section: None,
+            },
+            mattress_inliers: 0,
+            floor_inliers: 0,
+            patient_points: 0,
+        }
+    }
+
+    #[test]
+    fn starts_lie_flat_on_the_mattress_along_the_bed_toward_the_forests_shoulders() {
+        let bed = bed();
+        let bed_from_camera = bed.volume.bed_from_camera;
+        // The forest's pose: hips 0.3 m along the bed, 40° off the bed axis and rolled, shoulders toward -y.
+        let forest_in_bed = Isometry3::from_parts(
+            Translation3::new(0.05, 0.3, 0.2),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), core::f32::consts::PI - 0.7)
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 0.4),
+        );
+        let forest = bed_from_camera.inverse() * forest_in_bed;
+        let starts = grid_starts(&forest, &bed, 0.1);
+        for (i, s) in starts.iter().enumerate() {
+            let in_bed = bed_from_camera * s;
+            let t = in_bed.translation.vector;
+            assert!((t.z - 0.1).abs() < 1e-5, "start {i} at height {}", t.z);
+            let y = in_bed.rotation * Vector3::y();
+            let z = in_bed.rotation * Vector3::z();
+            assert!(
+                (y - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-5,
+                "body axis {y:?}"
+            );
+            assert!((z - Vector3::z()).norm() < 1e-5, "chest {z:?}");
+            // The grid is centred on the forest's hip centre, along the start's own axes.
+            let along = ALONG_M[i / ACROSS_M.len()];
+            let side = ACROSS_M[i % ACROSS_M.len()];
+            let x = in_bed.rotation * Vector3::x();
+            let expected = Vector3::new(0.05, 0.3, 0.1) + y * along + x * side;
+            assert!(
+                (t - expected).norm() < 1e-5,
+                "start {i} at {t:?}, expected {expected:?}"
+            );
+        }
+        assert_eq!(starts.len(), STARTS);
+    }
+
+    #[test]
+    fn with_a_raised_head_section_starts_also_lie_on_it_head_up_the_slope() {
+        let mut bed = bed();
+        let bed_from_camera = bed.volume.bed_from_camera;
+        let camera_from_bed = bed_from_camera.inverse();
+        // Raised 40° about the bed's x axis at the hinge y = 0, rising toward +y.
+        let slope = 40f32.to_radians();
+        let normal_bed = Vector3::new(0.0, -libm::sinf(slope), libm::cosf(slope));
+        bed.head_section = Some(Plane::through(
+            camera_from_bed.translation.vector,
+            camera_from_bed.rotation * normal_bed,
+        ));
+        // The forest's pose points the shoulders toward -y (wrong): the head-section starts ignore it.
+        let forest = camera_from_bed
+            * Isometry3::from_parts(
+                Translation3::new(0.0, 0.2, 0.3),
+                UnitQuaternion::from_axis_angle(&Vector3::z_axis(), core::f32::consts::PI),
+            );
+        let starts = grid_starts(&forest, &bed, 0.1);
+        assert_eq!(starts.len(), 2 * STARTS);
+        for s in &starts[STARTS..] {
+            let in_bed = bed_from_camera * s;
+            let z = in_bed.rotation * Vector3::z();
+            let y = in_bed.rotation * Vector3::y();
+            assert!((z - normal_bed).norm() < 1e-4, "chest {z:?}");
+            assert!(y.z > 0.5 && y.y > 0.5, "body axis {y:?} should rise along +y");
+            let height = normal_bed.dot(&in_bed.translation.vector);
+            assert!((height - 0.1).abs() < 1e-4, "back {height} above the section");
+        }
+    }
+
+    #[test]
+    fn back_depth_is_the_depth_of_the_lowest_vertex_below_the_origin() {
+        let v = [
+            Point3::new(0.0, 0.0, 0.05),
+            Point3::new(0.1, 0.2, -0.12),
+            Point3::new(0.0, 0.1, -0.02),
+        ];
+        assert!((back_depth_m(&v) - 0.12).abs() < 1e-6);
+        assert_eq!(back_depth_m(&[Point3::new(0.0, 0.0, 0.1)]), 0.0);
+    }
+}
