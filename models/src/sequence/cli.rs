@@ -16,9 +16,15 @@ pub struct SequenceArgs {
     /// Seed: the same seed gives byte-identical output.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Let the robot arm sweep the probe over the torso (occluding up to about half of it).
+    /// Let the robot arm sweep the probe over the torso (occluding up to about half of it: see
+    /// --sweep-max-occluded).
     #[arg(long)]
     pub occluder: bool,
+    /// With --occluder: the sweep hides at most this share of the torso (the robot's shoulder is placed so, checked
+    /// on the first frame). Seeds whose first shoulder already holds it give the sequence of earlier versions byte
+    /// for byte; 1 reproduces earlier versions for every seed.
+    #[arg(long, default_value_t = 0.5, value_parser = share)]
+    pub sweep_max_occluded: f32,
     /// The arm parks between the head and the whole torso for about 1 s (30 frames, under ~10 % of the torso left
     /// visible), then leaves; the frame range goes into DIR/sequence.json.
     #[arg(long, conflicts_with = "calibration")]
@@ -147,6 +153,16 @@ fn run_calibration(
     Ok(())
 }
 
+/// A share of the torso, in (0, 1].
+fn share(s: &str) -> Result<f32, String> {
+    let v: f32 = s.parse().map_err(|e| format!("{s:?} is not a number: {e}"))?;
+    if v > 0.0 && v <= 1.0 {
+        Ok(v)
+    } else {
+        Err(format!("{v} is not a share of the torso in (0, 1]"))
+    }
+}
+
 fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     let source = open_source(args.body, args.body_model.as_deref())?;
     let base = SequenceConfig::new(args.frames, args.seed, args.occluder);
@@ -154,6 +170,8 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         breathing_amplitude_m: args.breathing_mm / 1000.0,
         full_occlusion: args.full_occlusion,
         motion: args.motion.map(|m| m.resolve(args.seed)),
+        sweep_max_occluded: (args.occluder && args.sweep_max_occluded < 1.0)
+            .then_some(args.sweep_max_occluded),
         noise: if args.legacy_noise {
             crate::render::noise::KinectNoise::LEGACY
         } else if args.registered {
@@ -182,6 +200,13 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         100.0 * summary.torso_occluded_max,
         summary.frames_per_second
     );
+    if let Some(planned) = summary.sweep_occluded_planned {
+        eprintln!(
+            "arm placed so its sweep hides {:.0} % of the torso at most on the first frame (limit {:.0} %)",
+            100.0 * planned,
+            100.0 * args.sweep_max_occluded
+        );
+    }
     if let Some(o) = summary.episodes.full_occlusion {
         eprintln!(
             "full occlusion: frames {}..{} (arm moving {}..{}), torso hidden {:.0} % at least, arm wrist {:.2} m from the camera",
@@ -226,6 +251,29 @@ mod tests {
 
     fn parse(argv: &[&str]) -> Result<SequenceArgs, clap::Error> {
         Cli::try_parse_from(std::iter::once("sequence").chain(argv.iter().copied())).map(|c| c.args)
+    }
+
+    #[test]
+    fn the_sweeps_occlusion_limit_is_a_share() {
+        assert_eq!(
+            parse(&["--out", "d", "--occluder"]).unwrap().sweep_max_occluded,
+            0.5
+        );
+        assert_eq!(
+            parse(&["--out", "d", "--occluder", "--sweep-max-occluded", "0.4"])
+                .unwrap()
+                .sweep_max_occluded,
+            0.4
+        );
+        for bad in ["0", "1.5", "half"] {
+            let e = parse(&["--out", "d", "--sweep-max-occluded", bad])
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains("share of the torso") || e.contains("not a number"),
+                "{e}"
+            );
+        }
     }
 
     #[test]

@@ -297,6 +297,16 @@ fn smoothstep(x: f32) -> f32 {
 /// come nearer the camera than about 0.6 m, where the arm hides only a third of the torso. `None` when no candidate
 /// reaches the whole sweep (the caller keeps the usual shoulder).
 pub fn shoulder_for_full_occlusion(scene: &Scene, eye: Vector3<f32>, seed: u64) -> Option<Vector3<f32>> {
+    shoulders_for_full_occlusion(scene, eye, seed, 1).first().copied()
+}
+
+/// The `n` best shoulders of [`shoulder_for_full_occlusion`]'s search, best first (fewer when fewer reach).
+pub fn shoulders_for_full_occlusion(
+    scene: &Scene,
+    eye: Vector3<f32>,
+    seed: u64,
+    n: usize,
+) -> Vec<Vector3<f32>> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(seed, 0x540));
     let b = &scene.bed;
     let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
@@ -310,7 +320,7 @@ pub fn shoulder_for_full_occlusion(scene: &Scene, eye: Vector3<f32>, seed: u64) 
     let park_zone = eye + (Vector3::from(scene.torso_centre()) - eye).normalize() * 0.35;
     let reach = UPPER_LINK_M + FORE_LINK_M - 0.05;
     let (z_lo, z_hi) = (b.mattress_top + 0.1, (eye.z - 0.3).max(b.mattress_top + 0.15));
-    let mut best: Option<(f32, Vector3<f32>)> = None;
+    let mut found: Vec<(f32, Vector3<f32>)> = Vec::new();
     for _ in 0..400 {
         let s = Vector3::new(
             eye.x + rng.gen_range(-0.5..0.5),
@@ -320,12 +330,11 @@ pub fn shoulder_for_full_occlusion(scene: &Scene, eye: Vector3<f32>, seed: u64) 
         if wrists.iter().any(|w| (w - s).norm() > reach) {
             continue;
         }
-        let d = (park_zone - s).norm();
-        if best.is_none_or(|(bd, _)| d < bd) {
-            best = Some((d, s));
-        }
+        found.push(((park_zone - s).norm(), s));
     }
-    best.map(|(_, s)| s)
+    // A stable sort keeps the earlier of equal candidates first, as the single-best search did.
+    found.sort_by(|a, b| a.0.total_cmp(&b.0));
+    found.into_iter().take(n).map(|(_, s)| s).collect()
 }
 
 /// Number of random park candidates tried.

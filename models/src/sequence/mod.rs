@@ -72,6 +72,10 @@ pub struct SequenceConfig {
     /// Lengths of the episodes.
     #[serde(default)]
     pub episode_frames: EpisodeFrames,
+    /// The arm's sweep hides at most this share of the torso (checked on the first frame's body at the sweep's
+    /// extremes; the robot's shoulder is moved until it holds); `None`: no check, the shoulder of earlier versions.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sweep_max_occluded: Option<f32>,
 }
 
 impl SequenceConfig {
@@ -89,6 +93,7 @@ impl SequenceConfig {
             full_occlusion: false,
             motion: None,
             episode_frames: EpisodeFrames::default(),
+            sweep_max_occluded: None,
         }
     }
 }
@@ -188,6 +193,85 @@ pub struct SequenceSummary {
     pub frames_per_second: f32,
     /// The episodes as generated (with the measured occlusion of the park).
     pub episodes: Episodes,
+    /// With `sweep_max_occluded`: the largest share of the torso the sweep hides on the first frame's body.
+    pub sweep_occluded_planned: Option<f32>,
+}
+
+/// Candidate shoulders tried per source when the sweep's occlusion is limited.
+const SHOULDER_CANDIDATES: usize = 12;
+
+/// Torso and whole-body pixels in the renderer's last image.
+fn body_pixels(r: &Renderer, is_torso: &dyn Fn(u8) -> bool) -> (usize, usize) {
+    let b = r.buffers();
+    let mut torso = 0usize;
+    let mut all = 0usize;
+    for (l, p) in b.label.iter().zip(&b.part) {
+        if *l == Label::Body as u8 {
+            all += 1;
+            torso += is_torso(*p) as usize;
+        }
+    }
+    (torso, all)
+}
+
+/// The arm's target on the sweep at torso coordinates (`u` across, `v` from shoulders to hips): the probe on the
+/// skin, along its normal, the elbow away from the camera.
+fn sweep_target(
+    scene: &Scene,
+    normals: &[[f32; 3]],
+    shoulder: Vector3<f32>,
+    eye: Vector3<f32>,
+    u: f32,
+    v: f32,
+) -> ArmTarget {
+    let (contact, normal) = contact_at(scene, normals, u, v);
+    ArmTarget {
+        tip: contact,
+        axis: -normal,
+        hint: crate::dataset::elbow_hint(shoulder, contact, eye),
+    }
+}
+
+/// The first of `candidates` whose arm, at the sweep's extremes (hips to shoulders, both sides of the wobble), hides
+/// at most `limit` of the torso seen from `camera_from_world`, with the share it hides at most; when none does, the
+/// one that hides least.
+fn shoulder_within(
+    scene: &Scene,
+    camera_from_world: &Isometry3<f32>,
+    renderer: &mut Renderer,
+    eye: Vector3<f32>,
+    is_torso: &dyn Fn(u8) -> bool,
+    candidates: &[Vector3<f32>],
+    limit: f32,
+) -> (Vector3<f32>, f32) {
+    scene.render(renderer, camera_from_world, false);
+    let (torso0, _) = body_pixels(renderer, is_torso);
+    let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
+    let mut best = (candidates[0], f32::INFINITY);
+    for &shoulder in candidates {
+        let mut worst = 0.0f32;
+        for v in [0.9, 0.65, 0.4, 0.15] {
+            for u in [0.35, 0.65] {
+                let arm = sweep_target(scene, &normals, shoulder, eye, u, v).reach(shoulder);
+                scene.render(renderer, camera_from_world, false);
+                renderer.draw(&crate::scene::arm_draw(&arm.mesh), camera_from_world);
+                let (torso1, _) = body_pixels(renderer, is_torso);
+                if torso0 > 0 {
+                    worst = worst.max(1.0 - torso1 as f32 / torso0 as f32);
+                }
+            }
+            if worst > limit {
+                break;
+            }
+        }
+        if worst <= limit {
+            return (shoulder, worst);
+        }
+        if worst < best.1 {
+            best = (shoulder, worst);
+        }
+    }
+    best
 }
 
 /// Torso frame from the salient points (core's [`supine_core::torso::a_from_torso`]): origin at the hip centre, y
@@ -257,11 +341,34 @@ pub fn generate(
     let view = ViewParams::sample_nominal(&mut rng, scene0.torso_centre()).sample_view(&mut rng);
     let cfw = view.camera_from_world(scene0.midline_y(), bed.mattress_top);
     let eye = cfw.inverse().translation.vector;
-    let arm_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
-    let arm_shoulder = if cfg.full_occlusion {
-        episodes::shoulder_for_full_occlusion(&scene0, eye, cfg.seed).unwrap_or(arm_shoulder)
-    } else {
-        arm_shoulder
+    let usual_shoulder = crate::dataset::sample_shoulder(&scene0, scene0.torso_centre()[0], &mut rng);
+    let is_torso = |p: u8| torso_parts.contains(&p);
+    let mut renderer = Renderer::new(k);
+    let (arm_shoulder, sweep_occluded_planned) = match (cfg.occluder, cfg.sweep_max_occluded) {
+        (true, Some(limit)) => {
+            let mut candidates = if cfg.full_occlusion {
+                episodes::shoulders_for_full_occlusion(&scene0, eye, cfg.seed, SHOULDER_CANDIDATES)
+            } else {
+                Vec::new()
+            };
+            candidates.push(usual_shoulder);
+            let mut extra = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, 0x541));
+            for _ in 0..SHOULDER_CANDIDATES {
+                candidates.push(crate::dataset::sample_shoulder(
+                    &scene0,
+                    scene0.torso_centre()[0],
+                    &mut extra,
+                ));
+            }
+            let (s, occluded) =
+                shoulder_within(&scene0, &cfw, &mut renderer, eye, &is_torso, &candidates, limit);
+            (s, Some(occluded))
+        }
+        _ if cfg.full_occlusion => (
+            episodes::shoulder_for_full_occlusion(&scene0, eye, cfg.seed).unwrap_or(usual_shoulder),
+            None,
+        ),
+        _ => (usual_shoulder, None),
     };
     let tau = std::f32::consts::TAU;
     let drift_phase: [f32; 3] = [
@@ -302,7 +409,6 @@ pub fn generate(
     let mut truth = std::io::BufWriter::new(
         std::fs::File::create(&truth_path).with_context(|| format!("creating {}", truth_path.display()))?,
     );
-    let mut renderer = Renderer::new(k);
     let mut scratch = NoiseScratch::default();
     let mut temporal = TemporalState::default();
     let mut depth = vec![0u16; k.width as usize * k.height as usize];
@@ -355,7 +461,6 @@ pub fn generate(
             torso_out = Some((sel, writer));
         }
         let mut scene = Scene::new(&body, bed);
-        let is_torso = |p: u8| torso_parts.contains(&p);
         let phase = episodes.full_occlusion.map_or(ArmPhase::Path, |o| o.phase(f));
         if phase != ArmPhase::Path
             && park.is_none()
@@ -368,18 +473,7 @@ pub fn generate(
             park = Some(target);
         }
         scene.render(&mut renderer, &cfw, false);
-        let count = |r: &Renderer| {
-            let b = r.buffers();
-            let mut torso = 0usize;
-            let mut all = 0usize;
-            for (l, p) in b.label.iter().zip(&b.part) {
-                if *l == Label::Body as u8 {
-                    all += 1;
-                    torso += is_torso(*p) as usize;
-                }
-            }
-            (torso, all)
-        };
+        let count = |r: &Renderer| body_pixels(r, &is_torso);
         let (torso0, all0) = count(&renderer);
         let (mut torso_occ, mut body_occ) = (0.0, 0.0);
         let mut probe = None;
@@ -389,12 +483,7 @@ pub fn generate(
             let v = 0.9 - 0.75 * (1.0 - (2.0 * phase - 1.0).abs());
             let u = 0.5 + 0.15 * (tau * time / 7.0).sin();
             let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
-            let (contact, normal) = contact_at(&scene, &normals, u, v);
-            ArmTarget {
-                tip: contact,
-                axis: -normal,
-                hint: crate::dataset::elbow_hint(arm_shoulder, contact, eye),
-            }
+            sweep_target(&scene, &normals, arm_shoulder, eye, u, v)
         });
         let target = match (phase, park) {
             (ArmPhase::Path, _) | (_, None) => sweep,
@@ -516,6 +605,7 @@ pub fn generate(
         torso_occluded_max: occ_max,
         frames_per_second: cfg.frames as f32 / secs.max(1e-6),
         episodes,
+        sweep_occluded_planned,
     })
 }
 
