@@ -5,8 +5,8 @@
 //! numbers, so images made without it stay byte-identical.
 //!
 //! Cost: the edges' three row max filters (about 15 reads of 1/z per pixel of the band) dominate, then one draw
-//! per 32x32 blob cell with its disc painted, and registration's second row scan; all told the default model makes
-//! a dataset 20–30 % slower than the legacy chain (`docs/noise-model.md`). Temporal state: 12 B per pixel.
+//! per 32x32 blob cell with its disc painted, the shadow-side band's row pass and registration's second row scan;
+//! all told the default model makes a dataset 20–40 % slower than the legacy chain (`docs/noise-model.md`). Temporal state: 12 B per pixel.
 
 use super::RenderBuffers;
 use rand::RngCore;
@@ -76,7 +76,8 @@ fn is_zero_f32(x: &f32) -> bool {
     *x == 0.0
 }
 
-fn is_zero_u8(x: &u8) -> bool {
+/// Serde helper: skip a zero width, so manifests without the field stay as they were.
+pub(crate) fn is_zero_u8(x: &u8) -> bool {
     *x == 0
 }
 

@@ -15,13 +15,15 @@
 //!
 //! Optional effects ([`super::effects`], each off when its field is absent): blob dropouts (`blobs`), edge fattening
 //! and mixed pixels (`edges`), registration to the RGB camera (`registration`) and, in sequences, noise correlated
-//! between consecutive frames (`temporal_correlation`, [`KinectNoise::apply_frame`]).
+//! between consecutive frames (`temporal_correlation`, [`KinectNoise::apply_frame`]); and two switches of the
+//! shadow step: `shadow_at_pixel` (the pixel's own ray decides, not only its jittered read) and `min_shadow_px`
+//! (shorter shadow runs along a row keep their depth).
 //!
 //! Cost: one ChaCha8 `u64` per pixel feeds three table-driven normal draws (4096-entry inverse-CDF table, 12 bits
 //! each), so the whole chain is a few ns per pixel; only the requested rectangle is processed.
 
 use super::effects::{
-    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, mark_left_occlusion,
+    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, is_zero_u8, mark_left_occlusion,
     max_near_side_of_steps_left, near_side_of_steps, nearest_within, paint_blobs,
 };
 use super::{Label, NO_TRIANGLE, RenderBuffers};
@@ -84,10 +86,6 @@ pub struct KinectNoise {
     /// correlation window still finds enough dots beside a one-pixel shadow, so small steps cast no holes.
     #[serde(default, skip_serializing_if = "is_zero_u8")]
     pub min_shadow_px: u8,
-}
-
-fn is_zero_u8(x: &u8) -> bool {
-    *x == 0
 }
 
 fn is_zero(x: &f32) -> bool {
