@@ -560,7 +560,7 @@ impl KinectNoise {
             nearest_within(buf, r, band, &mut scratch.near_iz);
             nearest_within(buf, r + e.mixed_px as usize, band, &mut scratch.ring_iz);
             if e.hole_px > 0 || e.shadow_hole_px > 0 {
-                // hole_px 0 with a shadow band: reach 0 still marks nothing (the step's far pixel is left of it).
+                // With only the shadow-side band this just clears `hole_iz` for the band (no step reaches ∞).
                 let reach = if e.hole_px > 0 { r + e.hole_px as usize } else { 0 };
                 near_side_of_steps(
                     buf,
