@@ -140,7 +140,12 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
         noise: if let Some(path) = &args.noise {
             let bytes =
                 std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
-            serde_json::from_slice(&bytes).map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?
+            let noise: KinectNoise = serde_json::from_slice(&bytes)
+                .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+            noise
+                .validate()
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            noise
         } else if args.legacy_noise {
             KinectNoise::LEGACY
         } else if args.registered {

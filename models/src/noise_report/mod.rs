@@ -139,8 +139,40 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
         "edge_hole_median_px_near_left".into(),
         histogram_median(&c.edge_holes_near_left).map(f64::from),
     ));
+    // The same sensor properties split by step size, where the scenes' different mixes of steps no longer enter.
+    let bands = &c.big_by_band;
+    let share = |b: &[[u64; 4]]| {
+        let (holes, all) = b
+            .iter()
+            .fold((0, 0), |(h, a), x| (h + x[2] + x[3], a + x.iter().sum::<u64>()));
+        some_if(all >= 20, holes as f64 / all.max(1) as f64)
+    };
+    v.push(("big_jumps_with_hole_share_0.10_0.15".into(), share(&bands[0..1])));
+    v.push(("big_jumps_with_hole_share_0.15_0.25".into(), share(&bands[1..2])));
+    v.push(("big_jumps_with_hole_share_0.25_up".into(), share(&bands[2..])));
+    let gaps = &c.jumps_by_gap;
+    let flat = |g: &[[u64; 4]]| {
+        let (m, n) = g.iter().fold((0, 0), |(m, n), x| (m + x[3], n + x[2]));
+        some_if(n >= 20, m as f64 / n.max(1) as f64)
+    };
+    v.push(("mixed_px_per_flat_jump".into(), flat(gaps)));
+    v.push(("mixed_px_per_flat_jump_80_160mm".into(), flat(&gaps[0..1])));
+    v.push(("mixed_px_per_flat_jump_160_320mm".into(), flat(&gaps[1..2])));
+    v.push(("mixed_px_per_flat_jump_320mm_up".into(), flat(&gaps[2..])));
     v
 }
+
+/// Statistics split by step size (rows of [`scalars`] after the scene ones): shown beside the judged pooled ones,
+/// not judged (few steps per band in a short sequence).
+pub const STEP_STATISTICS: [&str; 7] = [
+    "big_jumps_with_hole_share_0.10_0.15",
+    "big_jumps_with_hole_share_0.15_0.25",
+    "big_jumps_with_hole_share_0.25_up",
+    "mixed_px_per_flat_jump",
+    "mixed_px_per_flat_jump_80_160mm",
+    "mixed_px_per_flat_jump_160_320mm",
+    "mixed_px_per_flat_jump_320mm_up",
+];
 
 /// Statistics that depend on the scene's content more than on the sensor: shown, not judged.
 pub const SCENE_STATISTICS: [&str; 5] = [
@@ -205,7 +237,11 @@ pub fn compare(window_mm: [u16; 2], real: Side, synthetic: Side) -> Report {
                 _ => None,
             };
             let close = match (r, s) {
-                _ if SCENE_STATISTICS.contains(&name.as_str()) => None,
+                _ if SCENE_STATISTICS.contains(&name.as_str())
+                    || STEP_STATISTICS.contains(&name.as_str()) =>
+                {
+                    None
+                }
                 (Some(r), Some(s)) => Some(
                     (s - r).abs() <= TOLERANCE * r.abs() + 1e-9
                         || spread.is_some_and(|[lo, hi]| (lo..=hi).contains(s)),
@@ -266,6 +302,7 @@ impl Report {
                     Some(true) => "yes",
                     Some(false) => "**no**",
                     None if SCENE_STATISTICS.contains(&r.statistic.as_str()) => "(scene)",
+                    None if STEP_STATISTICS.contains(&r.statistic.as_str()) => "(by step)",
                     None => "–",
                 }
             );

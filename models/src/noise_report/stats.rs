@@ -16,6 +16,12 @@ pub const JUMP_MM: u16 = 80;
 pub const BIG_JUMP_INV_M: f32 = 0.1;
 /// Holes at big jumps longer than this (px) are left out of the width fit (dark objects, not sensor geometry).
 pub const FIT_MAX_HOLE_PX: u32 = 64;
+/// Lower bounds of the bands (1/m, Δ(1/z)) that split the big discontinuities by size.
+pub const BIG_JUMP_BANDS_INV_M: [f32; 4] = [0.1, 0.15, 0.25, 0.5];
+/// Lower bounds of the bands (mm) that split the jumps by their gap.
+pub const JUMP_GAP_BANDS_MM: [i32; 4] = [80, 160, 320, 640];
+/// A jump's side is flat when the next pixel outward differs from its end by at most this (mm).
+pub const FLAT_MM: i32 = 30;
 /// Half-width of the stencil that estimates the surface normal from depth, pixels.
 pub const NORMAL_STEP: usize = 4;
 /// Bins of the hole-length histograms: lengths 1 to 63 px one by one, the last bin 64 px and longer.
@@ -89,6 +95,15 @@ pub struct Counts {
     pub hole_fit: [[f64; 5]; 2],
     /// Mixed pixels found inside those jumps.
     pub mixed_px: u64,
+    /// Big discontinuities by size, per [`BIG_JUMP_BANDS_INV_M`] band: `[valid near right, valid near left, hole
+    /// near right, hole near left]` (how the share with a hole depends on the step: the scenes differ in steps).
+    #[serde(default)]
+    pub big_by_band: Vec<[u64; 4]>,
+    /// Jumps by their gap, per [`JUMP_GAP_BANDS_MM`] band: `[jumps, mixed pixels, jumps between flat sides, mixed
+    /// pixels of those]` (flat: the pixel beyond each end continues within [`FLAT_MM`], so the step is a
+    /// discontinuity between surfaces, not a steep slope sampled every pixel).
+    #[serde(default)]
+    pub jumps_by_gap: Vec<[u64; 4]>,
     /// Per [`ANGLE_BINS_DEG`]: `[valid, invalid]` pixels on smooth surfaces.
     pub by_angle: Vec<[u64; 2]>,
     /// Per [`DEPTH_BINS_MM`]: `[valid, invalid]` pixels on smooth surfaces.
@@ -118,6 +133,8 @@ impl Counts {
             edge_holes_near_left: vec![0; LENGTH_BINS],
             by_angle: vec![[0; 2]; ANGLE_BINS_DEG.len()],
             by_depth: vec![[0; 2]; DEPTH_BINS_MM.len()],
+            big_by_band: vec![[0; 4]; BIG_JUMP_BANDS_INV_M.len()],
+            jumps_by_gap: vec![[0; 4]; JUMP_GAP_BANDS_MM.len()],
             levels_seen: vec![0; LEVEL_MAX_MM.div_ceil(64) + 1],
             ..Counts::default()
         }
@@ -140,6 +157,12 @@ impl Counts {
             a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
         }
         self.mixed_px += other.mixed_px;
+        for (a, b) in self.big_by_band.iter_mut().zip(&other.big_by_band) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
+        for (a, b) in self.jumps_by_gap.iter_mut().zip(&other.jumps_by_gap) {
+            a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        }
         for (a, b) in self.by_angle.iter_mut().zip(&other.by_angle) {
             a[0] += b[0];
             a[1] += b[1];
@@ -360,6 +383,7 @@ fn rows_runs(row: &[u16], y: usize, window: Window, angle: &AngleEstimator<'_>, 
             if dinv >= BIG_JUMP_INV_M {
                 let side = (r >= l) as usize; // 0: near side right
                 c.big_holes[side] += 1;
+                c.big_by_band[band_of_inv(dinv)][2 + side] += 1;
                 if len <= FIT_MAX_HOLE_PX {
                     let (x, y) = ((fx * dinv) as f64, len as f64);
                     let f = &mut c.hole_fit[side];
@@ -372,6 +396,13 @@ fn rows_runs(row: &[u16], y: usize, window: Window, angle: &AngleEstimator<'_>, 
             }
         }
     }
+}
+
+fn band_of_inv(dinv: f32) -> usize {
+    BIG_JUMP_BANDS_INV_M
+        .iter()
+        .rposition(|&lo| dinv >= lo)
+        .unwrap_or(0)
 }
 
 /// Depth jumps inside runs of valid pixels, and the mixed pixels within them: from a pixel `a`, the widest step of
@@ -404,8 +435,22 @@ fn row_jumps(row: &[u16], window: Window, c: &mut Counts) {
                 if window.holds(a.min(b) as u16) {
                     c.jumps += 1;
                     c.mixed_px += (k - 1) as u64;
-                    if 1000.0 / a.min(b) as f32 - 1000.0 / a.max(b) as f32 >= BIG_JUMP_INV_M {
+                    let dinv = 1000.0 / a.min(b) as f32 - 1000.0 / a.max(b) as f32;
+                    if dinv >= BIG_JUMP_INV_M {
                         c.big_jumps += 1;
+                        c.big_by_band[band_of_inv(dinv)][(b > a) as usize] += 1;
+                    }
+                    let flat = |o: Option<&u16>, end: i32| {
+                        o.is_some_and(|&o| o != 0 && (o as i32 - end).abs() <= FLAT_MM)
+                    };
+                    let is_flat = i > 0 && flat(row.get(i - 1), a) && flat(row.get(i + k + 1), b);
+                    let band = JUMP_GAP_BANDS_MM.iter().rposition(|&lo| gap > lo).unwrap_or(0);
+                    let g = &mut c.jumps_by_gap[band];
+                    g[0] += 1;
+                    g[1] += (k - 1) as u64;
+                    if is_flat {
+                        g[2] += 1;
+                        g[3] += (k - 1) as u64;
                     }
                 }
                 taken = k;

@@ -5,8 +5,8 @@
 //! numbers, so images made without it stay byte-identical.
 //!
 //! Cost: the edges' three row max filters (about 15 reads of 1/z per pixel of the band) dominate, then one draw
-//! per 32x32 blob cell with its disc painted, and registration's second row scan; all told the default model makes
-//! a dataset 20–30 % slower than the legacy chain (`docs/noise-model.md`). Temporal state: 12 B per pixel.
+//! per 32x32 blob cell with its disc painted, the shadow-side band's row pass and registration's second row scan;
+//! all told the default model makes a dataset 20–40 % slower than the legacy chain (`docs/noise-model.md`). Temporal state: 12 B per pixel.
 
 use super::RenderBuffers;
 use rand::RngCore;
@@ -43,10 +43,42 @@ pub struct EdgeEffects {
     pub hole_px: u8,
     /// A jump is big for `hole_px` when its sides differ by at least this in 1/z, 1/m.
     pub hole_min_inv_m: f32,
+    /// Width of the band beyond the fattened edge that has no depth left of a big jump's near surface (the
+    /// projector-shadow side: the window straddling the edge finds no match there either), pixels (0: none).
+    #[serde(default, skip_serializing_if = "is_zero_u8")]
+    pub shadow_hole_px: u8,
+    /// `shadow_hole_px` applies only where the near surface is at least this wide (pixels along the row), so thin
+    /// slivers keep their background.
+    #[serde(default, skip_serializing_if = "is_zero_u8")]
+    pub shadow_hole_min_width_px: u8,
     /// Width of the band beyond the fattened edge where mixed pixels occur, pixels.
     pub mixed_px: u8,
     /// Probability that a pixel in that band reads a mixed depth (disparity uniform in between).
     pub mixed: f32,
+    /// Mixed pixels fade with the step: full `mixed` up to half this step in 1/z (1/m), none from this step on (the
+    /// window blends disparities that differ by a pixel or two, and finds no match across larger ones); 0: no
+    /// fade.
+    #[serde(default, skip_serializing_if = "is_zero_f32")]
+    pub mixed_max_inv_m: f32,
+}
+
+impl EdgeEffects {
+    /// Probability of a mixed pixel next to a step of `dinv` in 1/z (1/m).
+    pub fn mixed_probability(&self, dinv: f32) -> f32 {
+        if self.mixed_max_inv_m <= 0.0 {
+            return self.mixed;
+        }
+        self.mixed * (2.0 - 2.0 * dinv / self.mixed_max_inv_m).clamp(0.0, 1.0)
+    }
+}
+
+fn is_zero_f32(x: &f32) -> bool {
+    *x == 0.0
+}
+
+/// Serde helper: skip a zero width, so manifests without the field stay as they were.
+pub(crate) fn is_zero_u8(x: &u8) -> bool {
+    *x == 0
 }
 
 /// Registration of depth to the RGB camera (OpenNI2 `setImageRegistrationMode`, `--registered` data): the image is
@@ -204,6 +236,49 @@ pub fn near_side_of_steps(
                 .iter()
                 .cloned()
                 .fold(0.0, f32::max);
+        }
+    }
+}
+
+/// Like [`near_side_of_steps`], for the other side: near side (1/z) of the discontinuities that lie within `r`
+/// pixels to the right of each pixel of the band, with the near surface on the right and at least `min_width` pixels
+/// wide (its 1/z within `min_inv_m / 2` of the step's near side that far), maxed into `out` (which
+/// [`near_side_of_steps`] filled for the band). `steps` is scratch.
+pub fn max_near_side_of_steps_left(
+    buf: &RenderBuffers,
+    r: usize,
+    min_inv_m: f32,
+    min_width: usize,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    steps: &mut Vec<f32>,
+    out: &mut [f32],
+) {
+    let w = buf.width;
+    steps.clear();
+    steps.resize(w, 0.0);
+    let sb = (x1 + r).min(w);
+    let width = min_width.max(1);
+    for y in y0..y1 {
+        let row = &buf.inv_z[y * w..(y + 1) * w];
+        steps[x0..sb].fill(0.0);
+        for u in x0..sb {
+            if u + 1 >= w {
+                break;
+            }
+            let (a, b) = (row[u], row[u + 1]);
+            // The far pixel u left of the near pixel u + 1, whose surface continues `width` pixels to the right.
+            if a > 0.0
+                && b - a >= min_inv_m
+                && u + width < w
+                && row[u + 1..=u + width].iter().all(|&n| n >= b - 0.5 * min_inv_m)
+            {
+                steps[u] = b;
+            }
+        }
+        for x in x0..x1 {
+            let m = steps[x..=(x + r).min(sb - 1)].iter().cloned().fold(0.0, f32::max);
+            let o = &mut out[y * w + x];
+            *o = o.max(m);
         }
     }
 }

@@ -15,14 +15,16 @@
 //!
 //! Optional effects ([`super::effects`], each off when its field is absent): blob dropouts (`blobs`), edge fattening
 //! and mixed pixels (`edges`), registration to the RGB camera (`registration`) and, in sequences, noise correlated
-//! between consecutive frames (`temporal_correlation`, [`KinectNoise::apply_frame`]).
+//! between consecutive frames (`temporal_correlation`, [`KinectNoise::apply_frame`]); and two switches of the
+//! shadow step: `shadow_at_pixel` (the pixel's own ray decides, not only its jittered read) and `min_shadow_px`
+//! (shorter shadow runs along a row keep their depth).
 //!
 //! Cost: one ChaCha8 `u64` per pixel feeds three table-driven normal draws (4096-entry inverse-CDF table, 12 bits
 //! each), so the whole chain is a few ns per pixel; only the requested rectangle is processed.
 
 use super::effects::{
-    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, mark_left_occlusion,
-    near_side_of_steps, nearest_within, paint_blobs,
+    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, is_zero_u8, mark_left_occlusion,
+    max_near_side_of_steps_left, near_side_of_steps, nearest_within, paint_blobs,
 };
 use super::{Label, NO_TRIANGLE, RenderBuffers};
 use rand::RngCore;
@@ -75,6 +77,15 @@ pub struct KinectNoise {
     /// Correlation of the noise draws between consecutive frames of a sequence, 0..1 (0: every frame fresh).
     #[serde(default, skip_serializing_if = "is_zero")]
     pub temporal_correlation: f32,
+    /// A pixel whose own ray hits a surface the projector cannot light gets no depth unless its jittered read lands
+    /// on a nearer surface (ragged foreground edges stay): lit background read from a neighbouring row no longer
+    /// fills shadows, which interleaved near and far pixels at thin structures.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub shadow_at_pixel: bool,
+    /// Shadow and occlusion runs shorter than this along a row keep their depth (0 or 1: all count): the 9x9
+    /// correlation window still finds enough dots beside a one-pixel shadow, so small steps cast no holes.
+    #[serde(default, skip_serializing_if = "is_zero_u8")]
+    pub min_shadow_px: u8,
 }
 
 fn is_zero(x: &f32) -> bool {
@@ -89,7 +100,7 @@ impl Default for KinectNoise {
             max_incidence_rad: 85f32.to_radians(),
             blobs: Some(BlobDropouts {
                 cell_px: 32,
-                rate: 0.05,
+                rate: 0.04,
                 grazing_rate: 0.3,
                 min_radius_px: 10.0,
                 max_radius_px: 26.0,
@@ -99,11 +110,16 @@ impl Default for KinectNoise {
                 min_step_m: 0.05,
                 hole_px: 3,
                 hole_min_inv_m: 0.1,
+                shadow_hole_px: 3,
+                shadow_hole_min_width_px: 4,
                 mixed_px: 2,
                 mixed: 1.0,
+                mixed_max_inv_m: 0.08,
             }),
             jitter_keeps_valid: true,
             temporal_correlation: 0.5,
+            shadow_at_pixel: true,
+            min_shadow_px: 2,
             ..KinectNoise::LEGACY
         }
     }
@@ -128,6 +144,8 @@ impl KinectNoise {
         registration: None,
         jitter_keeps_valid: false,
         temporal_correlation: 0.0,
+        shadow_at_pixel: false,
+        min_shadow_px: 0,
     };
 
     /// Registration as the real registered frames in `shared/realdata` show it (border fitted by the noise report).
@@ -135,6 +153,106 @@ impl KinectNoise {
         rgb_baseline_m: 0.025,
         border_px: [7, 29, 28, 15],
     };
+
+    /// Check every parameter (a noise model read from a manifest or a `--noise` file): a clear message naming the
+    /// first bad field, so a wrong file is an error rather than a panic or a silently broken image.
+    pub fn validate(&self) -> Result<(), String> {
+        let pos = |name: &str, x: f32| {
+            (x.is_finite() && x > 0.0)
+                .then_some(())
+                .ok_or(format!("noise.{name} must be a positive number, not {x}"))
+        };
+        let unit = |name: &str, x: f32| {
+            (0.0..=1.0)
+                .contains(&x)
+                .then_some(())
+                .ok_or(format!("noise.{name} must lie in 0..1, not {x}"))
+        };
+        pos("disparity_focal_px", self.disparity_focal_px)?;
+        pos("baseline_m", self.baseline_m)?;
+        pos("subpixel_steps", self.subpixel_steps)?;
+        pos("max_m", self.max_m)?;
+        if !(self.axial_const_m >= 0.0 && self.axial_quad_m >= 0.0 && self.lateral_px >= 0.0) {
+            return Err("noise.axial_const_m, axial_quad_m and lateral_px must be ≥ 0".into());
+        }
+        if !(self.min_m >= 0.0 && self.min_m < self.max_m) {
+            return Err(format!(
+                "noise.min_m ({}) must be ≥ 0 and below max_m ({})",
+                self.min_m, self.max_m
+            ));
+        }
+        if !(self.max_incidence_rad > 0.0 && self.max_incidence_rad <= FRAC_PI_2) {
+            return Err(format!(
+                "noise.max_incidence_rad must lie in (0, π/2], not {}",
+                self.max_incidence_rad
+            ));
+        }
+        unit("temporal_correlation", self.temporal_correlation)?;
+        if self.min_shadow_px > 16 {
+            return Err(format!(
+                "noise.min_shadow_px must be at most 16, not {}",
+                self.min_shadow_px
+            ));
+        }
+        if let Some(b) = &self.blobs {
+            if b.cell_px == 0 {
+                return Err("noise.blobs.cell_px must be at least 1".into());
+            }
+            unit("blobs.rate", b.rate)?;
+            unit("blobs.grazing_rate", b.grazing_rate)?;
+            if !(b.min_radius_px >= 0.0 && b.min_radius_px <= b.max_radius_px && b.max_radius_px <= 256.0) {
+                return Err(format!(
+                    "noise.blobs radii must satisfy 0 ≤ min_radius_px ({}) ≤ max_radius_px ({}) ≤ 256",
+                    b.min_radius_px, b.max_radius_px
+                ));
+            }
+        }
+        if let Some(e) = &self.edges {
+            if !(e.min_step_m.is_finite() && e.min_step_m >= 0.0) {
+                return Err(format!(
+                    "noise.edges.min_step_m must be ≥ 0, not {}",
+                    e.min_step_m
+                ));
+            }
+            pos("edges.hole_min_inv_m", e.hole_min_inv_m)?;
+            unit("edges.mixed", e.mixed)?;
+            if !(e.mixed_max_inv_m.is_finite() && e.mixed_max_inv_m >= 0.0) {
+                return Err(format!(
+                    "noise.edges.mixed_max_inv_m must be ≥ 0 (0: no fall-off), not {}",
+                    e.mixed_max_inv_m
+                ));
+            }
+            if e.fatten_px as usize + e.hole_px.max(e.shadow_hole_px).max(e.mixed_px) as usize > 32 {
+                return Err("noise.edges: fatten_px plus the widest band must be at most 32 px".into());
+            }
+            if e.shadow_hole_px > 0 && e.shadow_hole_min_width_px > 64 {
+                return Err(format!(
+                    "noise.edges.shadow_hole_min_width_px must be at most 64, not {}",
+                    e.shadow_hole_min_width_px
+                ));
+            }
+        }
+        if let Some(r) = &self.registration
+            && !(r.rgb_baseline_m >= 0.0 && r.rgb_baseline_m < self.baseline_m)
+        {
+            return Err(format!(
+                "noise.registration.rgb_baseline_m must lie in [0, baseline_m = {}), not {}",
+                self.baseline_m, r.rgb_baseline_m
+            ));
+        }
+        Ok(())
+    }
+
+    /// This model with its registration's RGB baseline set to `m` (metres); unchanged without registration.
+    pub fn with_rgb_baseline(self, m: f32) -> KinectNoise {
+        KinectNoise {
+            registration: self.registration.map(|r| Registration {
+                rgb_baseline_m: m,
+                ..r
+            }),
+            ..self
+        }
+    }
 
     /// This model with registration to the RGB camera (for `--registered` data).
     pub fn registered(self) -> KinectNoise {
@@ -415,6 +533,9 @@ impl KinectNoise {
             if let Some(r) = self.registration {
                 mark_left_occlusion(buf, v, intrinsics.fx * r.rgb_baseline_m, &mut scratch.shadow);
             }
+            if self.min_shadow_px > 1 {
+                clear_short_runs(&mut scratch.shadow[row..row + w], self.min_shadow_px as usize);
+            }
             let ray_y = (v as f32 - intrinsics.cy) / intrinsics.fy;
             for u in px0..px1 {
                 let t = buf.triangle[row + u];
@@ -438,12 +559,28 @@ impl KinectNoise {
             let r = e.fatten_px as usize;
             nearest_within(buf, r, band, &mut scratch.near_iz);
             nearest_within(buf, r + e.mixed_px as usize, band, &mut scratch.ring_iz);
-            if e.hole_px > 0 {
-                let reach = r + e.hole_px as usize;
+            if e.hole_px > 0 || e.shadow_hole_px > 0 {
+                // With only the shadow-side band this just clears `hole_iz` for the band (no step reaches ∞).
+                let reach = if e.hole_px > 0 { r + e.hole_px as usize } else { 0 };
                 near_side_of_steps(
                     buf,
                     reach,
+                    if e.hole_px > 0 {
+                        e.hole_min_inv_m
+                    } else {
+                        f32::INFINITY
+                    },
+                    band,
+                    &mut scratch.steps,
+                    &mut scratch.hole_iz,
+                );
+            }
+            if e.shadow_hole_px > 0 {
+                max_near_side_of_steps_left(
+                    buf,
+                    r + e.shadow_hole_px as usize - 1,
                     e.hole_min_inv_m,
+                    e.shadow_hole_min_width_px as usize,
                     band,
                     &mut scratch.steps,
                     &mut scratch.hole_iz,
@@ -514,8 +651,10 @@ impl KinectNoise {
                 }
                 let mut iz = buf.inv_z[s];
                 let c = scratch.cos_theta[s];
-                let mut dropped = (self.blobs.is_some() && scratch.blob_mask[v * w + u])
-                    || self.registration.is_some_and(|r| r.in_border(u, v, w, h));
+                let own = v * w + u;
+                let mut dropped = (self.blobs.is_some() && scratch.blob_mask[own])
+                    || self.registration.is_some_and(|r| r.in_border(u, v, w, h))
+                    || (self.shadow_at_pixel && scratch.shadow[own] && iz <= buf.inv_z[own]);
                 if let Some(e) = self.edges {
                     // A background pixel next to a nearer surface: fattened within fatten_px, maybe mixed one
                     // pixel beyond (1/z steps compared as z_far − z_near > min_step without a division).
@@ -523,11 +662,15 @@ impl KinectNoise {
                     let (near, ring) = (scratch.near_iz[s], scratch.ring_iz[s]);
                     if e.fatten_px > 0 && jump(near) {
                         iz = near;
-                    } else if e.hole_px > 0 && scratch.hole_iz[v * w + u] - iz >= 0.5 * e.hole_min_inv_m {
+                    } else if (e.hole_px > 0 || e.shadow_hole_px > 0)
+                        && scratch.hole_iz[v * w + u] - iz >= 0.5 * e.hole_min_inv_m
+                    {
                         // On the far side of a discontinuity within the window: no match, no depth (decided at
                         // the pixel itself, so jitter does not scatter the band into salt).
                         dropped = true;
-                    } else if jump(ring) && (((bits >> 36) & mask) as f32) < e.mixed * NORMAL_TABLE_LEN as f32
+                    } else if jump(ring)
+                        && (((bits >> 36) & mask) as f32)
+                            < e.mixed_probability(ring - iz) * NORMAL_TABLE_LEN as f32
                     {
                         let a = ((bits >> 48) & mask) as f32 / NORMAL_TABLE_LEN as f32;
                         iz += a * (ring - iz);
@@ -653,6 +796,24 @@ impl KinectNoise {
             }
         }
         scratch.tables_for = Some(*self);
+    }
+}
+
+/// Clear the runs of `true` shorter than `min` in `row`.
+fn clear_short_runs(row: &mut [bool], min: usize) {
+    let mut x = 0;
+    while x < row.len() {
+        if !row[x] {
+            x += 1;
+            continue;
+        }
+        let start = x;
+        while x < row.len() && row[x] {
+            x += 1;
+        }
+        if x - start < min {
+            row[start..x].fill(false);
+        }
     }
 }
 
@@ -1066,6 +1227,143 @@ mod tests {
             }
         }
         assert!(g[500] > 0 && g[l + 2] > 0);
+    }
+
+    #[test]
+    fn shadow_side_band_holes_left_of_wide_surfaces_only() {
+        let r = box_render();
+        // No projector shadow and no jitter, so only the band can empty pixels left of the box (x ≈ 282).
+        let base = KinectNoise {
+            lateral_px: 0.0,
+            blobs: None,
+            projector_shadow: false,
+            ..KinectNoise::default()
+        };
+        let band = |shadow_hole_px: u8, shadow_hole_min_width_px: u8| {
+            let n = KinectNoise {
+                edges: Some(EdgeEffects {
+                    shadow_hole_px,
+                    shadow_hole_min_width_px,
+                    ..base.edges.unwrap()
+                }),
+                ..base
+            };
+            let img = noisy(&r, &n, 5);
+            let row = img[240 * 640..241 * 640].to_vec();
+            let left = row.iter().position(|&d| d > 0 && d < 1600).unwrap();
+            // Left of the box: its fattened pixel, then the band's holes.
+            row[..left].iter().rev().take_while(|&&d| d == 0).count()
+        };
+        assert_eq!(band(0, 0), 0);
+        assert_eq!(band(3, 4), 3, "three pixels beyond the fattened one");
+        assert_eq!(band(3, 64), 3, "the box is 76 px wide: at least 64");
+        assert_eq!(
+            band(3, 100),
+            0,
+            "narrower than the minimum width: the background stays"
+        );
+    }
+
+    #[test]
+    fn noise_parameters_are_validated() {
+        for n in [
+            KinectNoise::LEGACY,
+            KinectNoise::default(),
+            KinectNoise::default().registered(),
+        ] {
+            assert_eq!(n.validate(), Ok(()));
+        }
+        let d = KinectNoise::default();
+        let e = d.edges.unwrap();
+        let b = d.blobs.unwrap();
+        let bad = [
+            (KinectNoise { min_m: 5.0, ..d }, "min_m"),
+            (
+                KinectNoise {
+                    temporal_correlation: 1.5,
+                    ..d
+                },
+                "temporal_correlation",
+            ),
+            (
+                KinectNoise {
+                    baseline_m: f32::NAN,
+                    ..d
+                },
+                "baseline_m",
+            ),
+            (
+                KinectNoise {
+                    blobs: Some(BlobDropouts { cell_px: 0, ..b }),
+                    ..d
+                },
+                "cell_px",
+            ),
+            (
+                KinectNoise {
+                    blobs: Some(BlobDropouts {
+                        min_radius_px: 30.0,
+                        ..b
+                    }),
+                    ..d
+                },
+                "radii",
+            ),
+            (
+                KinectNoise {
+                    edges: Some(EdgeEffects {
+                        mixed_max_inv_m: -0.1,
+                        ..e
+                    }),
+                    ..d
+                },
+                "mixed_max_inv_m",
+            ),
+            (
+                KinectNoise {
+                    edges: Some(EdgeEffects {
+                        shadow_hole_min_width_px: 65,
+                        ..e
+                    }),
+                    ..d
+                },
+                "shadow_hole_min_width_px",
+            ),
+            (
+                KinectNoise {
+                    edges: Some(EdgeEffects {
+                        shadow_hole_px: 40,
+                        ..e
+                    }),
+                    ..d
+                },
+                "widest band",
+            ),
+            (
+                KinectNoise {
+                    edges: Some(EdgeEffects { mixed: 2.0, ..e }),
+                    ..d
+                },
+                "edges.mixed",
+            ),
+            (d.registered().with_rgb_baseline(0.1), "rgb_baseline_m"),
+        ];
+        for (n, field) in bad {
+            let err = n.validate().unwrap_err();
+            assert!(err.contains(field), "{field}: {err}");
+        }
+        // Mixed pixels fade with the step: full up to half of mixed_max_inv_m, none from it on.
+        assert_eq!(e.mixed_probability(0.02), 1.0);
+        assert!((e.mixed_probability(0.06) - 0.5).abs() < 1e-6);
+        assert_eq!(e.mixed_probability(0.2), 0.0);
+        assert_eq!(
+            EdgeEffects {
+                mixed_max_inv_m: 0.0,
+                ..e
+            }
+            .mixed_probability(0.5),
+            1.0
+        );
     }
 
     #[test]

@@ -59,6 +59,9 @@ pub struct SequenceArgs {
     /// sequences byte for byte).
     #[arg(long, conflicts_with = "registered")]
     pub legacy_noise: bool,
+    /// Noise model from this JSON file (a `KinectNoise`, as in sequence.json's config.noise) instead of the default.
+    #[arg(long, conflicts_with_all = ["registered", "legacy_noise"])]
+    pub noise: Option<PathBuf>,
     /// Write a machine-readable summary here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -172,7 +175,16 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         motion: args.motion.map(|m| m.resolve(args.seed)),
         sweep_max_occluded: (args.occluder && args.sweep_max_occluded < 1.0)
             .then_some(args.sweep_max_occluded),
-        noise: if args.legacy_noise {
+        noise: if let Some(path) = &args.noise {
+            let bytes =
+                std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+            let noise: crate::render::noise::KinectNoise = serde_json::from_slice(&bytes)
+                .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+            noise
+                .validate()
+                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+            noise
+        } else if args.legacy_noise {
             crate::render::noise::KinectNoise::LEGACY
         } else if args.registered {
             base.noise.registered()
