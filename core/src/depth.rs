@@ -96,11 +96,15 @@ impl<'a> DepthFrame<'a> {
     }
 
     /// Depth at pixel (u, v) in millimetres, `None` outside the image; 0 means no measurement.
+    #[inline]
     pub fn at(&self, u: i32, v: i32) -> Option<u16> {
-        if u < 0 || v < 0 || u >= self.width as i32 || v >= self.height as i32 {
+        // Negative coordinates wrap to large unsigned ones: one compare per axis (the forest reads two per node).
+        if u as u32 >= self.width as u32 || v as u32 >= self.height as u32 {
             return None;
         }
-        Some(self.depth_mm[v as usize * self.width as usize + u as usize])
+        self.depth_mm
+            .get(v as usize * self.width as usize + u as usize)
+            .copied()
     }
 }
 

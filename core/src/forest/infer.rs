@@ -102,7 +102,7 @@ pub fn descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
 }
 
 /// Samples descended together by [`descend_samples`] (with the trees, up to `GROUP * MAX_TREES` load chains in flight).
-const GROUP: usize = 4;
+const GROUP: usize = 8;
 /// Rows per band of the descent order (samples of one band probe overlapping rows of the image).
 const BAND_ROWS: u16 = 8;
 /// Bands of a frame at most (480 rows; taller frames share the last band).
@@ -126,9 +126,26 @@ fn band_order(samples: &[SamplePixel], order: &mut [u16]) {
     }
 }
 
+/// One lockstep step of a descent at node `at` of tree `t`: the node the sample goes to next (a leaf stays where it
+/// is) and whether `at` is a leaf. Branch-free on the test's outcome, which the predictor cannot learn.
+#[inline(always)]
+fn step<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    t: usize,
+    at: u32,
+    img: &D,
+    (x, y, s): (i32, i32, ProbeScale),
+) -> (u32, bool) {
+    match model.node(t, at) {
+        Node::Leaf(_) => (at, true),
+        Node::Split { test, left } => (left + u32::from(!test.goes_left(img, x, y, s)), false),
+    }
+}
+
 /// The leaves of every sample in every tree (`leaves[i][..trees]` for `samples[i]`, the same leaves as [`descend`]):
-/// samples are taken in band order, [`GROUP`] at a time, and all their trees descended in lockstep, so that many
-/// independent chains of node and depth loads overlap.
+/// samples are taken in band order, [`GROUP`] at a time, and all their trees descended in lockstep, a lane that
+/// reached its leaf staying there until the group's deepest lane is done, so that up to `GROUP * trees` independent
+/// chains of node and depth loads overlap and the loop has one well-predicted branch per level.
 fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     model: &M,
     trees: usize,
@@ -140,35 +157,30 @@ fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     let trees = trees.min(MAX_TREES);
     let order = &mut order[..samples.len()];
     band_order(samples, order);
-    const LANES: usize = GROUP * MAX_TREES;
     for group in order.chunks(GROUP) {
-        // Lane j: sample group[j / trees], tree j % trees.
-        let lanes = group.len() * trees;
-        let mut at = [0u32; LANES];
-        let mut live = [false; LANES];
+        let mut at = [[0u32; MAX_TREES]; GROUP];
         let mut px = [(0i32, 0i32, ProbeScale::new(0)); GROUP];
         for (g, &i) in group.iter().enumerate() {
             let s = &samples[i as usize];
             px[g] = (s.x as i32, s.y as i32, ProbeScale::new(s.d_mm));
         }
-        live[..lanes].fill(true);
-        let mut left_to_do = lanes;
-        while left_to_do > 0 {
-            for j in 0..lanes {
-                if !live[j] {
-                    continue;
+        loop {
+            let mut done = true;
+            for (a, &p) in at.iter_mut().zip(&px).take(group.len()) {
+                for t in 0..trees {
+                    let (next, leaf) = step(model, t, a[t], img, p);
+                    a[t] = next;
+                    done &= leaf;
                 }
-                let (g, t) = (j / trees, j % trees);
-                match model.node(t, at[j]) {
-                    Node::Leaf(l) => {
-                        leaves[group[g] as usize][t] = l;
-                        live[j] = false;
-                        left_to_do -= 1;
-                    }
-                    Node::Split { test, left } => {
-                        let (x, y, sc) = px[g];
-                        at[j] = left + u32::from(!test.goes_left(img, x, y, sc));
-                    }
+            }
+            if done {
+                break;
+            }
+        }
+        for (a, &i) in at.iter().zip(group.iter()) {
+            for t in 0..trees {
+                if let Node::Leaf(l) = model.node(t, a[t]) {
+                    leaves[i as usize][t] = l;
                 }
             }
         }

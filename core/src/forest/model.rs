@@ -205,7 +205,8 @@ pub struct ForestView<'a> {
     tree_start: [u32; MAX_TREES + 1],
     leaves: usize,
     samples: u32,
-    nodes: LeSlice<'a, u32>,
+    /// The `NODE` section's bytes (8 per record, read as one little-endian u64).
+    nodes: &'a [u8],
     rvot: &'a [u8],
     vote_shift: u32,
     rcon: LeSlice<'a, u8>,
@@ -321,7 +322,7 @@ impl<'a> ForestView<'a> {
             tree_start,
             leaves,
             samples,
-            nodes: node_words,
+            nodes: node_words.as_bytes(),
             rvot,
             vote_shift: shift,
             rcon,
@@ -398,12 +399,16 @@ impl ForestModel for ForestView<'_> {
     #[inline]
     fn node(&self, tree: usize, index: u32) -> Node {
         let g = (self.tree_start[tree] + index) as usize;
-        let w1 = self.nodes.at(g * 2 + 1);
+        // One 8-byte load per record (one bounds check), the word order of the file.
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&self.nodes[g * 8..g * 8 + 8]);
+        let r = u64::from_le_bytes(b);
+        let w1 = (r >> 32) as u32;
         let c = w1 >> 8;
         if c & NODE_LEAF != 0 {
             return Node::Leaf(c & !NODE_LEAF);
         }
-        let [ux, uy, vx, vy] = self.nodes.at(g * 2).to_le_bytes();
+        let [ux, uy, vx, vy] = (r as u32).to_le_bytes();
         let test = SplitTest {
             u: [ux as i8, uy as i8],
             v: [vx as i8, vy as i8],

@@ -55,19 +55,25 @@ impl Clip<'_> {
     /// Whether pixel (x, y) at depth `d_mm` is kept; returns its camera-frame point when it is.
     #[inline]
     pub fn keep(&self, k: &Intrinsics, x: u16, y: u16, d_mm: u16) -> Option<Point3> {
-        if d_mm == 0 || d_mm > self.max_depth_mm {
-            return None;
-        }
+        let (kept, p) = self.test(k, x, y, d_mm);
+        kept.then_some(p)
+    }
+
+    /// [`Self::keep`] without branches: the verdict and the pixel's camera-frame point (meaningless when not kept).
+    #[inline]
+    fn test(&self, k: &Intrinsics, x: u16, y: u16, d_mm: u16) -> (bool, Point3) {
         let p = k.unproject(x as f32, y as f32, d_mm as f32 * 1e-3);
-        self.above
-            .iter()
-            .all(|pl| pl.signed_distance(&p) >= self.margin_m)
-            .then_some(p)
+        let mut kept = (d_mm != 0) & (d_mm <= self.max_depth_mm);
+        for pl in self.above {
+            kept &= pl.signed_distance(&p) >= self.margin_m;
+        }
+        (kept, p)
     }
 }
 
 /// Draw up to `out.len()` kept pixels uniformly from the clip's region with a generator seeded by `seed`; returns
-/// how many were drawn (fewer when the region keeps too few pixels). Duplicates are possible, as in Shotton et al.
+/// how many were drawn (fewer when the region keeps too few pixels; the entry after the last one drawn may be
+/// overwritten). Duplicates are possible, as in Shotton et al.
 pub fn sample_pixels<D: DepthImage + ?Sized>(
     img: &D,
     k: &Intrinsics,
@@ -85,20 +91,22 @@ pub fn sample_pixels<D: DepthImage + ?Sized>(
     let mut rng = SplitMix64::new(seed);
     let mut n = 0;
     let mut tries = out.len() * MAX_TRIES_PER_SAMPLE;
+    // Branch-free on the clip's verdict (a coin flip per try the predictor cannot learn): every try is written to
+    // the next free slot and kept by advancing the count, so consecutive tries' random depth reads overlap.
+    // The slot past the last kept sample may hold a rejected try.
     while n < out.len() && tries > 0 {
         tries -= 1;
         let x = r.u0 + rng.below(w as usize) as u16;
         let y = r.v0 + rng.below(h as usize) as u16;
         let d = img.depth_at(x as i32, y as i32);
-        if let Some(p) = clip.keep(k, x, y, d) {
-            out[n] = SamplePixel {
-                x,
-                y,
-                d_mm: d,
-                p: p.coords.into(),
-            };
-            n += 1;
-        }
+        let (kept, p) = clip.test(k, x, y, d);
+        out[n] = SamplePixel {
+            x,
+            y,
+            d_mm: d,
+            p: p.coords.into(),
+        };
+        n += usize::from(kept);
     }
     n
 }
