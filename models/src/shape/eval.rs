@@ -160,7 +160,7 @@ pub struct VertexErrors {
 }
 
 /// [`VertexErrors`] of `est` (σ units) posed with `pose` against `truth`.
-fn vertex_errors(
+pub fn vertex_errors(
     model: &BodyModel,
     pose: &Pose,
     est: &[f32; 20],
@@ -291,7 +291,16 @@ pub fn evaluate(
     if cfg.max_bodies > 0 {
         bodies.truncate(cfg.max_bodies);
     }
-    let names = ["subspace", "fitting", "combined", "mean_shape", "combined_bed"];
+    // `subspace_forest`: the forest's answer on the same subspace coefficients, for comparison when the model
+    // file's estimate uses its linear regression (the same as `subspace` otherwise).
+    let names = [
+        "subspace",
+        "fitting",
+        "combined",
+        "mean_shape",
+        "combined_bed",
+        "subspace_forest",
+    ];
     let mut all: Vec<Stats> = vec![Stats::default(); names.len()];
     let mut arm: Vec<Stats> = vec![Stats::default(); names.len()];
     let mut no_arm: Vec<Stats> = vec![Stats::default(); names.len()];
@@ -412,15 +421,17 @@ pub fn evaluate(
                 combined.map(|r| r.association),
                 None,
                 on_bed.map(|r| r.association),
+                None,
             ];
-            let results: [Option<[f32; 20]>; 5] = [
+            let results: [Option<[f32; 20]>; 6] = [
                 Some(est.shape),
                 best.map(|r| r.shape),
                 combined.map(|r| r.shape),
                 Some([0.0; 20]),
                 on_bed.map(|r| r.shape),
+                Some(shape.forest().predict(&est.subspace)),
             ];
-            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed];
+            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed, ms_sub];
             for m in 0..names.len() {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
                     vec![&mut all, &mut arm]
@@ -489,6 +500,7 @@ pub fn evaluate(
         "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,
                        "pitch_m": shape.camera().distance_m / shape.camera().focal_px},
         "model_bytes": shape_bytes.len(),
+        "regressor": if shape.linear().is_some() { "linear" } else { "forest" },
         "commit": commit(),
     });
     for (m, name) in names.iter().enumerate() {
