@@ -61,9 +61,9 @@ mod tests {
     #[test]
     fn recovers_a_known_affine_map() {
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let truth: Vec<f32> = (0..LINEAR_LEN).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let truth: Vec<f32> = (0..LINEAR_LEN).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let x: Vec<[f32; DIM]> = (0..200)
-            .map(|_| std::array::from_fn(|_| rng.random_range(-2.0..2.0)))
+            .map(|_| std::array::from_fn(|_| rng.gen_range(-2.0..2.0)))
             .collect();
         let y: Vec<[f32; DIM]> = x.iter().map(|c| predict(&truth, c)).collect();
         let w = fit(&x, &y, 0.0).unwrap();
