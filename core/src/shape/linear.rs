@@ -10,6 +10,11 @@ use crate::model_file::LeSlice;
 
 use super::subspace::SUBSPACE_DIM;
 
+/// Bound of each predicted coefficient (σ units): an affine map extrapolates without limit on coefficients far
+/// outside the training views (an arm or wrong salient points), while bodies lie within ±3σ (the bound beyond
+/// which the issue rejects plain fits).
+pub const LINEAR_BOUND: f32 = 3.0;
+
 /// Values of a `LINR` section: `SUBSPACE_DIM` weight rows of `SHAPE_COMPONENTS` outputs, then the bias row.
 pub const LINEAR_LEN: usize = (SUBSPACE_DIM + 1) * SHAPE_COMPONENTS;
 
@@ -21,7 +26,7 @@ pub struct ShapeLinear<'a> {
 }
 
 impl ShapeLinear<'_> {
-    /// The shape coefficients (σ units) for subspace coefficients `c`.
+    /// The shape coefficients (σ units) for subspace coefficients `c`, each clamped to ±[`LINEAR_BOUND`].
     pub fn predict(&self, c: &[f32; SUBSPACE_DIM]) -> [f32; SHAPE_COMPONENTS] {
         let mut out = [0.0f32; SHAPE_COMPONENTS];
         for (j, o) in out.iter_mut().enumerate() {
@@ -32,6 +37,9 @@ impl ShapeLinear<'_> {
             for (j, o) in out.iter_mut().enumerate() {
                 *o += self.w.at(base + j) * ck;
             }
+        }
+        for o in out.iter_mut() {
+            *o = o.clamp(-LINEAR_BOUND, LINEAR_BOUND);
         }
         out
     }

@@ -293,6 +293,10 @@ fn a_linear_regression_section_replaces_the_forest_and_bad_ones_are_rejected() {
         let want = if j == 3 { 1.0 } else { 0.0 } + j as f32 / 10.0;
         assert!((sj - want).abs() < 1e-6, "s[{j}] {sj} vs {want}");
     }
+    // Far outside the training views the affine map is held at ±3σ.
+    c[3] = 100.0;
+    assert_eq!(m.regress(&c)[3], super::linear::LINEAR_BOUND);
+    c[3] = 0.5;
     // Without the section the forest answers.
     let (buf, k) = tiny();
     let plain = ShapeModelView::parse(&buf[..k]).unwrap();

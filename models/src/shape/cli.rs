@@ -254,10 +254,10 @@ fn print_table(r: &serde_json::Value) {
             );
         }
     }
-    if let Some(m) = r["multi_frame"].as_array() {
-        for j in m {
+    for (key, label) in [("multi_frame", "subspace"), ("multi_frame_combined", "combined")] {
+        for j in r[key].as_array().into_iter().flatten() {
             println!(
-                "multi-frame N={:<3} vertex raw {:.1} mm  aligned {:.1} mm  s1 NRMSE {:.3}",
+                "multi-frame {label:<8} N={:<3} vertex raw {:.1} mm  aligned {:.1} mm  s1 NRMSE {:.3}",
                 j["views"],
                 j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["vertex_error_aligned_mm_mean"].as_f64().unwrap_or(f64::NAN),

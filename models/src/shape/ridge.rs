@@ -4,7 +4,7 @@
 //! scale. Cost: one pass of 20x20 outer products over the samples and a 20x20 Cholesky solve.
 
 use nalgebra::{DMatrix, DVector};
-use supine_core::shape::linear::LINEAR_LEN;
+use supine_core::shape::linear::{LINEAR_BOUND, LINEAR_LEN};
 
 use super::forest::DIM;
 
@@ -47,9 +47,13 @@ pub fn fit(x: &[[f32; DIM]], y: &[[f32; DIM]], lambda: f64) -> Option<Vec<f32>> 
     out.iter().all(|v| v.is_finite()).then_some(out)
 }
 
-/// The prediction of weights `w` (the `LINR` layout) for inputs `c`, as core computes it.
+/// The prediction of weights `w` (the `LINR` layout) for inputs `c`, as core computes it (clamped to
+/// ±[`LINEAR_BOUND`]).
 pub fn predict(w: &[f32], c: &[f32; DIM]) -> [f32; DIM] {
-    std::array::from_fn(|j| w[DIM * DIM + j] + (0..DIM).map(|k| w[k * DIM + j] * c[k]).sum::<f32>())
+    std::array::from_fn(|j| {
+        (w[DIM * DIM + j] + (0..DIM).map(|k| w[k * DIM + j] * c[k]).sum::<f32>())
+            .clamp(-LINEAR_BOUND, LINEAR_BOUND)
+    })
 }
 
 #[cfg(test)]
@@ -63,7 +67,7 @@ mod tests {
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         let truth: Vec<f32> = (0..LINEAR_LEN).map(|_| rng.gen_range(-1.0..1.0)).collect();
         let x: Vec<[f32; DIM]> = (0..200)
-            .map(|_| std::array::from_fn(|_| rng.gen_range(-2.0..2.0)))
+            .map(|_| std::array::from_fn(|_| rng.gen_range(-0.05..0.05)))
             .collect();
         let y: Vec<[f32; DIM]> = x.iter().map(|c| predict(&truth, c)).collect();
         let w = fit(&x, &y, 0.0).unwrap();
