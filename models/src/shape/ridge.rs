@@ -29,7 +29,8 @@ pub fn fit(x: &[[f32; DIM]], y: &[[f32; DIM]], lambda: f64) -> Option<Vec<f32>> 
         a += &xc * xc.transpose();
         b += &xc * yc.transpose();
     }
-    let pen = lambda * a.diagonal().mean();
+    // The floor keeps a positive `lambda` meaningful when the inputs do not vary (then only the bias is learnt).
+    let pen = lambda * a.diagonal().mean().max(1e-9);
     for k in 0..DIM {
         a[(k, k)] += pen;
     }
