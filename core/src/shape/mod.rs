@@ -23,7 +23,8 @@
 //! Host-only sections (`INFO`: the training report) are ignored here.
 //!
 //! Per-frame cost (one desktop core, default 112x80 canonical view, stride 2): canonical view ~1 ms, projection
-//! ~1.5 ms, forest ~5 µs (linear regression under 1 µs). The caller lends the canonical image buffer ([`ShapeModelView::pixels`] f32).
+//! ~1.5 ms, forest ~5 µs (linear regression under 1 µs). The caller lends the canonical image buffer
+//! ([`ShapeModelView::pixels`] f32).
 
 pub mod canonical;
 pub mod forest;
@@ -193,8 +194,8 @@ impl<'a> ShapeModelView<'a> {
     }
 
     /// Shape from one frame: the canonical view of `frame` for the salient points (camera frame) and the mattress
-    /// plane (camera frame, normal up), its masked projection and the regression's prediction ([`Self::regress`]). `canonical` is the
-    /// caller's scratch of [`Self::pixels`] values (it holds the canonical image afterwards).
+    /// plane (camera frame, normal up), its masked projection and the regression's prediction ([`Self::regress`]).
+    /// `canonical` is the caller's scratch of [`Self::pixels`] values (it holds the canonical image afterwards).
     pub fn estimate(
         &self,
         frame: &DepthFrame<'_>,
