@@ -295,7 +295,7 @@ fn a_linear_regression_section_replaces_the_forest_and_bad_ones_are_rejected() {
     }
     // Far outside the training views the affine map is held at ±3σ.
     c[3] = 100.0;
-    assert_eq!(m.regress(&c)[3], super::linear::LINEAR_BOUND);
+    assert_eq!(m.regress(&c)[3], linear::LINEAR_BOUND);
     c[3] = 0.5;
     // Without the section the forest answers.
     let (buf, k) = tiny();
