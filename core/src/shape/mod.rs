@@ -17,14 +17,18 @@
 //! LEAF i16  L·20     leaf shape vectors (σ units), quantised
 //! LSCL f32  20       dequantisation scale of each output
 //! CREF u32  1        optional: canonical height reference (0 hip centre, 1 mattress; absent = 0)
+//! LINR f32  21·20    optional: linear shape regression (see linear::ShapeLinear); when present the estimate
+//!                    uses it instead of the forest
 //! ```
 //! Host-only sections (`INFO`: the training report) are ignored here.
 //!
 //! Per-frame cost (one desktop core, default 112x80 canonical view, stride 2): canonical view ~1 ms, projection
-//! ~1.5 ms, forest ~5 µs. The caller lends the canonical image buffer ([`ShapeModelView::pixels`] f32).
+//! ~1.5 ms, forest ~5 µs (linear regression under 1 µs). The caller lends the canonical image buffer
+//! ([`ShapeModelView::pixels`] f32).
 
 pub mod canonical;
 pub mod forest;
+pub mod linear;
 pub mod subspace;
 
 use crate::body_model::SHAPE_COMPONENTS;
@@ -35,6 +39,7 @@ use crate::model_file::{ModelFile, ModelFileError, Tag};
 use crate::salient::SalientPoint;
 use canonical::{CanonicalCamera, DegenerateFrame, HeightReference};
 use forest::ShapeForest;
+use linear::{LINEAR_LEN, ShapeLinear};
 use subspace::{ProjectError, SUBSPACE_DIM, Subspace};
 
 /// Kind tag of shape model files.
@@ -49,6 +54,7 @@ pub struct ShapeModelView<'a> {
     camera: CanonicalCamera,
     subspace: Subspace<'a>,
     forest: ShapeForest<'a>,
+    linear: Option<ShapeLinear<'a>>,
 }
 
 fn invalid(tag: &[u8; 4], what: &'static str) -> ModelFileError {
@@ -126,6 +132,14 @@ impl<'a> ShapeModelView<'a> {
             leaf_scale: file.typed::<f32>(*b"LSCL", Some(SHAPE_COMPONENTS))?,
         };
         forest::validate(&forest).map_err(|what| invalid(b"NFEA", what))?;
+        let linear = match file.typed::<f32>(*b"LINR", Some(LINEAR_LEN)) {
+            Err(ModelFileError::MissingSection { .. }) => None,
+            Err(e) => return Err(e),
+            Ok(w) if !w.iter().all(f32::is_finite) => {
+                return Err(invalid(b"LINR", "non-finite linear regression weight"));
+            }
+            Ok(w) => Some(ShapeLinear { w }),
+        };
         Ok(ShapeModelView {
             file,
             camera,
@@ -136,6 +150,7 @@ impl<'a> ShapeModelView<'a> {
                 prior,
             },
             forest,
+            linear,
         })
     }
 
@@ -164,9 +179,23 @@ impl<'a> ShapeModelView<'a> {
         &self.forest
     }
 
+    /// The linear shape regression, if the file has one (then [`Self::estimate`] uses it, not the forest).
+    pub fn linear(&self) -> Option<&ShapeLinear<'a>> {
+        self.linear.as_ref()
+    }
+
+    /// The shape coefficients (σ units) for subspace coefficients `c`: the linear regression if present, else
+    /// the forest.
+    pub fn regress(&self, c: &[f32; SUBSPACE_DIM]) -> [f32; SHAPE_COMPONENTS] {
+        match &self.linear {
+            Some(l) => l.predict(c),
+            None => self.forest.predict(c),
+        }
+    }
+
     /// Shape from one frame: the canonical view of `frame` for the salient points (camera frame) and the mattress
-    /// plane (camera frame, normal up), its masked projection and the forest's prediction. `canonical` is the
-    /// caller's scratch of [`Self::pixels`] values (it holds the canonical image afterwards).
+    /// plane (camera frame, normal up), its masked projection and the regression's prediction ([`Self::regress`]).
+    /// `canonical` is the caller's scratch of [`Self::pixels`] values (it holds the canonical image afterwards).
     pub fn estimate(
         &self,
         frame: &DepthFrame<'_>,
@@ -180,7 +209,7 @@ impl<'a> ShapeModelView<'a> {
             .map_err(|e| ShapeError::Project(ProjectError::Size(e)))?;
         let (c, visible) = self.subspace.project(canonical).map_err(ShapeError::Project)?;
         Ok(ShapeEstimate {
-            shape: self.forest.predict(&c),
+            shape: self.regress(&c),
             subspace: c,
             visible,
             camera_from_body,

@@ -246,3 +246,69 @@ fn the_height_reference_is_read_and_an_unknown_one_rejected() {
         Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"CREF"
     ));
 }
+
+/// The fixture re-written with a `LINR` section of `values` (bytes: f32 little-endian).
+fn with_linear(values: &[u8], out: &mut [u8]) -> usize {
+    use crate::model_file::{ElemType, SectionData};
+    let (buf, n) = tiny();
+    let file = ModelFile::parse(&buf[..n], KIND, FORMAT_VERSION).unwrap();
+    let count = file.section_count();
+    let mut sections = [SectionData {
+        tag: *b"LINR",
+        elem: ElemType::F32,
+        bytes: values,
+    }; 16];
+    for (i, d) in sections.iter_mut().enumerate().take(count) {
+        let s = file.section_at(i).unwrap();
+        *d = SectionData {
+            tag: s.tag,
+            elem: s.elem,
+            bytes: s.bytes,
+        };
+    }
+    crate::model_file::write(KIND, FORMAT_VERSION, &sections[..=count], out).unwrap()
+}
+
+#[test]
+fn a_linear_regression_section_replaces_the_forest_and_bad_ones_are_rejected() {
+    use super::linear::LINEAR_LEN;
+    // s_j = 2 c_j + j / 10 for j < 20 (the identity times two plus a bias).
+    let mut w = [0.0f32; LINEAR_LEN];
+    for j in 0..SHAPE_COMPONENTS {
+        w[j * SHAPE_COMPONENTS + j] = 2.0;
+        w[SUBSPACE_DIM * SHAPE_COMPONENTS + j] = j as f32 / 10.0;
+    }
+    let mut bytes = [0u8; LINEAR_LEN * 4];
+    for (b, v) in bytes.chunks_exact_mut(4).zip(&w) {
+        b.copy_from_slice(&v.to_le_bytes());
+    }
+    let mut out = [0u8; 8192];
+    let n = with_linear(&bytes, &mut out);
+    let m = ShapeModelView::parse(&out[..n]).unwrap();
+    let mut c = [0.0f32; SUBSPACE_DIM];
+    c[3] = 0.5;
+    let s = m.regress(&c);
+    assert!(m.linear().is_some());
+    for (j, sj) in s.iter().enumerate() {
+        let want = if j == 3 { 1.0 } else { 0.0 } + j as f32 / 10.0;
+        assert!((sj - want).abs() < 1e-6, "s[{j}] {sj} vs {want}");
+    }
+    // Far outside the training views the affine map is held at ±3σ.
+    c[3] = 100.0;
+    assert_eq!(m.regress(&c)[3], linear::LINEAR_BOUND);
+    c[3] = 0.5;
+    // Without the section the forest answers.
+    let (buf, k) = tiny();
+    let plain = ShapeModelView::parse(&buf[..k]).unwrap();
+    assert!(plain.linear().is_none());
+    assert_eq!(plain.regress(&c), plain.forest().predict(&c));
+    // A non-finite weight or a wrong length is a clear error.
+    bytes[8..12].copy_from_slice(&f32::NAN.to_le_bytes());
+    let n = with_linear(&bytes, &mut out);
+    assert!(matches!(
+        ShapeModelView::parse(&out[..n]),
+        Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"LINR"
+    ));
+    let n = with_linear(&bytes[..40], &mut out);
+    assert!(ShapeModelView::parse(&out[..n]).is_err());
+}

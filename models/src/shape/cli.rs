@@ -213,8 +213,8 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
 
 fn print_table(r: &serde_json::Value) {
     println!(
-        "torso_coeffs {}   images {}   seed {}   commit {}",
-        r["torso_coeffs"], r["images"], r["seed"], r["commit"]
+        "torso_coeffs {}   images {}   seed {}   regressor {}   commit {}",
+        r["torso_coeffs"], r["images"], r["seed"], r["regressor"], r["commit"]
     );
     println!(
         "{:<18} {:>4} {:>34} {:>9} {:>11} {:>7} {:>10} {:>9} {:>9}",
@@ -228,7 +228,14 @@ fn print_table(r: &serde_json::Value) {
         "ms/frame",
         "rejected"
     );
-    for m in ["subspace", "fitting", "combined", "combined_bed", "mean_shape"] {
+    for m in [
+        "subspace",
+        "subspace_forest",
+        "fitting",
+        "combined",
+        "combined_bed",
+        "mean_shape",
+    ] {
         for (label, j) in [(m.to_string(), &r[m]), (format!("{m}+arm"), &r[m]["with_arm"])] {
             let c: Vec<String> = (0..5)
                 .map(|k| format!("{:.3}", j["coeff_nrmse"][k].as_f64().unwrap_or(f64::NAN)))
@@ -247,10 +254,10 @@ fn print_table(r: &serde_json::Value) {
             );
         }
     }
-    if let Some(m) = r["multi_frame"].as_array() {
-        for j in m {
+    for (key, label) in [("multi_frame", "subspace"), ("multi_frame_combined", "combined")] {
+        for j in r[key].as_array().into_iter().flatten() {
             println!(
-                "multi-frame N={:<3} vertex raw {:.1} mm  aligned {:.1} mm  s1 NRMSE {:.3}",
+                "multi-frame {label:<8} N={:<3} vertex raw {:.1} mm  aligned {:.1} mm  s1 NRMSE {:.3}",
                 j["views"],
                 j["vertex_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 j["vertex_error_aligned_mm_mean"].as_f64().unwrap_or(f64::NAN),

@@ -1,7 +1,8 @@
 //! `eval shape` (paper §4.2, Fig. 5) on the held-out bodies: subspace regression, plain model fitting (from the
 //! mean, several starts, results beyond ±3σ rejected and counted) and their combination; coefficient NRMSE and
 //! error SD (σ units), the dense upper-body vertex error in the true pose, ms per frame; arm views apart; and the
-//! multi-frame estimate (per-coefficient median over N views) against N.
+//! multi-frame estimate (per-coefficient median over N views) against N, of the subspace estimates and of the
+//! combined fits.
 //!
 //! Cost per frame: subspace ~3 ms, combined fit ~10 ms, plain fit 5 starts, plus four posings (LBS) for the errors.
 
@@ -160,7 +161,7 @@ pub struct VertexErrors {
 }
 
 /// [`VertexErrors`] of `est` (σ units) posed with `pose` against `truth`.
-fn vertex_errors(
+pub fn vertex_errors(
     model: &BodyModel,
     pose: &Pose,
     est: &[f32; 20],
@@ -291,12 +292,22 @@ pub fn evaluate(
     if cfg.max_bodies > 0 {
         bodies.truncate(cfg.max_bodies);
     }
-    let names = ["subspace", "fitting", "combined", "mean_shape", "combined_bed"];
+    // `subspace_forest`: the forest's answer on the same subspace coefficients, for comparison when the model
+    // file's estimate uses its linear regression (the same as `subspace` otherwise).
+    let names = [
+        "subspace",
+        "fitting",
+        "combined",
+        "mean_shape",
+        "combined_bed",
+        "subspace_forest",
+    ];
     let mut all: Vec<Stats> = vec![Stats::default(); names.len()];
     let mut arm: Vec<Stats> = vec![Stats::default(); names.len()];
     let mut no_arm: Vec<Stats> = vec![Stats::default(); names.len()];
     let ns = [1usize, 2, 4, 8, 12];
     let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
+    let mut multi_comb: Vec<Stats> = vec![Stats::default(); ns.len()];
     let mut canonical = vec![0.0f32; shape.pixels()];
     let mut subset = vec![[0.0f32; 3]; body.counts().subset];
     let mut normals = subset.clone();
@@ -314,6 +325,7 @@ pub fn evaluate(
         let truth_shape = first.shape;
         let truth_posed = model.pose(&Shape::from_normalised(model, &truth_shape), &pose);
         let mut per_view = Vec::new();
+        let mut per_view_comb = Vec::new();
         for f in &frames {
             images += 1;
             let frame = DepthFrame::new(&f.depth, k.width, k.height, Timestamp::default(), f.view as u32)
@@ -369,6 +381,9 @@ pub fn evaluate(
                 .ok()
             });
             let ms_comb = t1.elapsed().as_secs_f64() * 1e3;
+            if let Some(r) = &combined {
+                per_view_comb.push(r.shape);
+            }
             // Combined with the bed-contact term.
             let t3 = Instant::now();
             let contact = BedContact {
@@ -412,15 +427,17 @@ pub fn evaluate(
                 combined.map(|r| r.association),
                 None,
                 on_bed.map(|r| r.association),
+                None,
             ];
-            let results: [Option<[f32; 20]>; 5] = [
+            let results: [Option<[f32; 20]>; 6] = [
                 Some(est.shape),
                 best.map(|r| r.shape),
                 combined.map(|r| r.shape),
                 Some([0.0; 20]),
                 on_bed.map(|r| r.shape),
+                Some(shape.forest().predict(&est.subspace)),
             ];
-            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed];
+            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed, ms_sub];
             for m in 0..names.len() {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
                     vec![&mut all, &mut arm]
@@ -452,20 +469,13 @@ pub fn evaluate(
                 }
             }
         }
-        for (i, &n) in ns.iter().enumerate() {
-            if per_view.len() >= n {
-                let mut z = [0.0f32; 20];
-                for (c, zc) in z.iter_mut().enumerate() {
-                    let mut v: Vec<f32> = per_view[..n].iter().map(|s| s[c]).collect();
-                    v.sort_by(f32::total_cmp);
-                    *zc = if n % 2 == 1 {
-                        v[n / 2]
-                    } else {
-                        0.5 * (v[n / 2 - 1] + v[n / 2])
-                    };
+        for (views, stats) in [(&per_view, &mut multi), (&per_view_comb, &mut multi_comb)] {
+            for (i, &n) in ns.iter().enumerate() {
+                if views.len() >= n {
+                    let z = median_shape(&views[..n]);
+                    let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
+                    stats[i].add(&z, &truth_shape, &e);
                 }
-                let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
-                multi[i].add(&z, &truth_shape, &e);
             }
         }
         bar.inc(1);
@@ -489,6 +499,7 @@ pub fn evaluate(
         "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,
                        "pitch_m": shape.camera().distance_m / shape.camera().focal_px},
         "model_bytes": shape_bytes.len(),
+        "regressor": if shape.linear().is_some() { "linear" } else { "forest" },
         "commit": commit(),
     });
     for (m, name) in names.iter().enumerate() {
@@ -497,19 +508,35 @@ pub fn evaluate(
         j["without_arm"] = no_arm[m].json();
         report[*name] = j;
     }
-    report["multi_frame"] = serde_json::Value::Array(
-        ns.iter()
-            .zip(&multi)
-            // N beyond the dataset's views per body has no frames.
-            .filter(|(_, s)| s.n > 0)
-            .map(|(n, s)| {
-                let mut j = s.json();
-                j["views"] = (*n).into();
-                j
-            })
-            .collect(),
-    );
+    for (key, stats) in [("multi_frame", &multi), ("multi_frame_combined", &multi_comb)] {
+        report[key] = serde_json::Value::Array(
+            ns.iter()
+                .zip(stats)
+                // N beyond the dataset's views per body has no frames.
+                .filter(|(_, s)| s.n > 0)
+                .map(|(n, s)| {
+                    let mut j = s.json();
+                    j["views"] = (*n).into();
+                    j
+                })
+                .collect(),
+        );
+    }
     Ok(report)
+}
+
+/// Per-coefficient median of shape estimates (the robust combination of several frames).
+fn median_shape(views: &[[f32; 20]]) -> [f32; 20] {
+    let n = views.len();
+    std::array::from_fn(|c| {
+        let mut v: Vec<f32> = views.iter().map(|s| s[c]).collect();
+        v.sort_by(f32::total_cmp);
+        if n % 2 == 1 {
+            v[n / 2]
+        } else {
+            0.5 * (v[n / 2 - 1] + v[n / 2])
+        }
+    })
 }
 
 /// The workspace's commit (short hash, `-dirty` when the tree has changes), or "unknown".

@@ -7,6 +7,7 @@ use nalgebra::DMatrix;
 use supine_core::model_file::{ElemType, SectionData, encoded_len, write};
 use supine_core::shape::canonical::CanonicalCamera;
 use supine_core::shape::forest::LEAF_FEATURE;
+use supine_core::shape::linear::LINEAR_LEN;
 use supine_core::shape::subspace::SUBSPACE_DIM;
 use supine_core::shape::{FORMAT_VERSION, KIND};
 
@@ -38,6 +39,24 @@ pub fn write_shape_model(
     forest: &Forest,
     info: &str,
 ) -> Result<Vec<u8>> {
+    write_shape_model_with_linear(cam, mean, eigen, prior, forest, None, info)
+}
+
+/// [`write_shape_model`] with an optional linear shape regression (`LINR`, layout
+/// [`supine_core::shape::linear::ShapeLinear`]: 21 · 20 values, unquantised), which the estimate then uses.
+pub fn write_shape_model_with_linear(
+    cam: &CanonicalCamera,
+    mean: &[f32],
+    eigen: &DMatrix<f32>,
+    prior: &[f32; SUBSPACE_DIM],
+    forest: &Forest,
+    linear: Option<&[f32]>,
+    info: &str,
+) -> Result<Vec<u8>> {
+    ensure!(
+        linear.is_none_or(|l| l.len() == LINEAR_LEN),
+        "linear regression must hold {LINEAR_LEN} values"
+    );
     let p = cam.pixels();
     ensure!(
         mean.len() == p && eigen.nrows() == p && eigen.ncols() == SUBSPACE_DIM,
@@ -103,7 +122,7 @@ pub fn write_shape_model(
         cam.max_height_m,
         cam.below_mattress_m,
     ];
-    let bufs: Vec<(&[u8; 4], ElemType, Vec<u8>)> = vec![
+    let mut bufs: Vec<(&[u8; 4], ElemType, Vec<u8>)> = vec![
         (b"HEAD", ElemType::U32, le(&head, u32::to_le_bytes)),
         (b"CAMR", ElemType::F32, le(&camr, f32::to_le_bytes)),
         (b"MEAN", ElemType::F32, le(mean, f32::to_le_bytes)),
@@ -123,6 +142,9 @@ pub fn write_shape_model(
         ),
         (b"INFO", ElemType::U8, info.as_bytes().to_vec()),
     ];
+    if let Some(l) = linear {
+        bufs.push((b"LINR", ElemType::F32, le(l, f32::to_le_bytes)));
+    }
     let sections: Vec<SectionData<'_>> = bufs
         .iter()
         .map(|(t, e, b)| SectionData {

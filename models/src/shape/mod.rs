@@ -8,6 +8,7 @@ pub mod data;
 pub mod eval;
 pub mod file;
 pub mod forest;
+pub mod ridge;
 pub mod rsvd;
 pub mod train;
 

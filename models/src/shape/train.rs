@@ -19,7 +19,7 @@ use supine_core::shape::subspace::SUBSPACE_DIM;
 use supine_core::time::Timestamp;
 
 use super::data::{frames_of, intrinsics, train_validation};
-use super::file::write_shape_model;
+use super::file::{write_shape_model, write_shape_model_with_linear};
 use super::forest::{DIM, Forest, ForestConfig, Node};
 use crate::dataset::Dataset;
 
@@ -222,9 +222,14 @@ pub const SCORED: usize = 5;
 
 /// Mean over the first [`SCORED`] coefficients of the normalised RMSE of `forest` on (x, y).
 pub fn mean_nrmse(forest: &Forest, x: &[[f32; DIM]], y: &[[f32; DIM]]) -> f32 {
+    mean_nrmse_of(|c| forest.predict(c), x, y)
+}
+
+/// Mean over the first [`SCORED`] coefficients of the normalised RMSE of a regression `f` on (x, y).
+pub fn mean_nrmse_of(f: impl Fn(&[f32; DIM]) -> [f32; DIM], x: &[[f32; DIM]], y: &[[f32; DIM]]) -> f32 {
     let mut se = [0.0f64; SCORED];
     for (c, s) in x.iter().zip(y) {
-        let p = forest.predict(c);
+        let p = f(c);
         for k in 0..SCORED {
             se[k] += ((p[k] - s[k]) as f64).powi(2);
         }
@@ -327,6 +332,30 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     } else {
         Forest::train(&xa, &ya, &fc)
     };
+    // The linear regression (ridge) on the same inputs, its penalty chosen on the validation bodies; it replaces
+    // the forest in the file when it scores better there (it did on every run so far: docs/shape-eval.md).
+    let mut ridge_choices = Vec::new();
+    let mut best_ridge = (f32::INFINITY, 0.0f64);
+    for lambda in [1e-4f64, 1e-3, 1e-2, 3e-2, 1e-1, 3e-1] {
+        let Some(w) = super::ridge::fit(&xf, &yf, lambda) else {
+            continue;
+        };
+        let e = mean_nrmse_of(|c| super::ridge::predict(&w, c), &xv, &yv);
+        ridge_choices.push(serde_json::json!({"lambda": lambda, "validation_mean_nrmse": e}));
+        if e < best_ridge.0 {
+            best_ridge = (e, lambda);
+        }
+    }
+    let linear = if best_ridge.0 < best.0 {
+        let (x, y) = if cfg.holdout_validation {
+            (&xf, &yf)
+        } else {
+            (&xa, &ya)
+        };
+        Some(super::ridge::fit(x, y, best_ridge.1).context("ridge regression is singular")?)
+    } else {
+        None
+    };
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
@@ -337,10 +366,21 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "fit_bodies": fit_b.len(),
         "validation_bodies": val_b.len(),
         "validation_choices": choices,
+        "ridge_choices": ridge_choices,
+        "regressor": if linear.is_some() { "linear" } else { "forest" },
+        "ridge_lambda": best_ridge.1,
         "nodes": forest.node_count(),
     });
     // The file's provenance leaves the wall time out, so equal seeds give byte-identical files.
-    let bytes = write_shape_model(&cam, &mean, &eigen, &prior, &forest, &report.to_string())?;
+    let bytes = write_shape_model_with_linear(
+        &cam,
+        &mean,
+        &eigen,
+        &prior,
+        &forest,
+        linear.as_deref(),
+        &report.to_string(),
+    )?;
     let mut report = report;
     report["seconds"] = t0.elapsed().as_secs_f32().into();
     ShapeModelView::parse(&bytes)
@@ -375,6 +415,13 @@ mod tests {
         assert_eq!(a.bytes, b.bytes, "training is not deterministic");
         let view = ShapeModelView::parse(&a.bytes).unwrap();
         assert_eq!(view.forest().tree_count(), 3);
+        // Whichever regression validation chose, the estimate uses it.
+        let c = [0.3f32; 20];
+        let expect = match view.linear() {
+            Some(l) => l.predict(&c),
+            None => view.forest().predict(&c),
+        };
+        assert_eq!(view.regress(&c), expect);
         let model = BodyModel::load_default().unwrap();
         let ec = EvalConfig {
             seed: 1,
