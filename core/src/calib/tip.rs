@@ -43,6 +43,11 @@ pub struct ProbeShape {
     /// How far the far end of the seen points falls short of the tip along the axis, metres: the head's end face
     /// looks away from the camera and its rim is seen at a grazing angle, where the sensor loses points.
     pub axial_shortfall_m: f32,
+    /// Distance from the tip back to the head's back face, metres: the face across the axis where the narrower
+    /// handle begins (0: the probe has no such face and the tip is taken from the far end of the points alone).
+    pub head_back_m: f32,
+    /// Radius of the handle behind the head, metres (the back face is the head's cross-section outside it).
+    pub handle_radius_m: f32,
 }
 
 impl ProbeShape {
@@ -55,6 +60,8 @@ impl ProbeShape {
         head_half_xy_m: [0.03, 0.012],
         max_radius_m: 0.045,
         axial_shortfall_m: 0.004,
+        head_back_m: 0.07,
+        handle_radius_m: 0.02,
     };
 }
 
@@ -114,6 +121,12 @@ pub enum TipError {
         /// What made it ambiguous.
         reason: &'static str,
     },
+    /// The tip found lies farther from the expected tip than the prior's uncertainty allows: the detector took
+    /// something else (the wrist, the head's other end) for it.
+    FarFromPrior {
+        /// Distance from the expected tip, metres.
+        distance_m: f32,
+    },
     /// A tip was found but with too little confidence.
     LowConfidence {
         /// The confidence reached.
@@ -130,6 +143,11 @@ impl fmt::Display for TipError {
                 "no probe visible where the arm says it is ({points} depth points on the probe head)"
             ),
             TipError::Ambiguous { reason } => write!(f, "ambiguous probe tip: {reason}"),
+            TipError::FarFromPrior { distance_m } => write!(
+                f,
+                "the probe tip found lies {:.0} mm from where the arm says it is, farther than the guess allows",
+                distance_m * 1000.0
+            ),
             TipError::LowConfidence { confidence } => {
                 write!(f, "probe tip found with low confidence {confidence:.2}")
             }
@@ -351,7 +369,19 @@ pub fn detect_tip<const N: usize>(
     if c_free < 0.5 {
         return Err(TipError::NoProbe { points: 0 });
     }
-    let tip = tip + a * shape.axial_shortfall_m;
+    // Along the axis, the head's back face is the better reference where the camera sees it: the far end of the
+    // points is cut short where the arm shadows the head's end from the projector (1-2 cm on validation poses)
+    // and its percentile moves with how many points lie behind it.
+    let tip = match back_face(scratch, n, tip, [a, ex, ey], shape) {
+        Some(s_back) => tip + a * (s_back + shape.head_back_m),
+        None => tip + a * shape.axial_shortfall_m,
+    };
+    // The tip can only be as far from the expected one as the prior allows (plus the head's half width, which
+    // the box fit may move it by when the prior's orientation is a little off).
+    let distance_m = (tip - t0).norm();
+    if distance_m > err + shape.head_half_xy_m[0] {
+        return Err(TipError::FarFromPrior { distance_m });
+    }
     // Expected head points: the head's visible area (head length x its width) at this distance, subsampled.
     let px_per_m = k.fx / tip.z.max(0.1);
     let expected =
@@ -369,6 +399,61 @@ pub fn detect_tip<const N: usize>(
         confidence,
         head_points,
     })
+}
+
+/// Fewest points on the head's back face for it to place the tip.
+const MIN_BACK_FACE_POINTS: usize = 8;
+
+/// Where the head's back face lies along the axis relative to `tip` (the far end of the points, fitted across the
+/// axis), metres; `None` when the camera does not see it well enough. Its points are those inside the head's
+/// cross-section (2 mm in from its faces) and outside the handle (3 mm out), in a window from just behind where
+/// the face would be if the far end were complete to 3 cm ahead of it (the far end can only fall short); the
+/// face is the densest 1 cm of them (side-face points that jitter inward spread over the window), placed at their
+/// median.
+fn back_face<const N: usize>(
+    scratch: &mut TipScratch<N>,
+    n: usize,
+    tip: Point3,
+    [a, ex, ey]: [Vector3; 3],
+    shape: &ProbeShape,
+) -> Option<f32> {
+    if shape.head_back_m <= 0.0 {
+        return None;
+    }
+    // The camera must look at the face from the handle's side, not along it edge-on.
+    let view = (tip - a * shape.head_back_m).coords;
+    if view.dot(&a) < 0.1 * view.norm() {
+        return None;
+    }
+    let [hx, hy] = shape.head_half_xy_m;
+    let (in_x, in_y, out_r) = (hx - 0.002, hy - 0.002, shape.handle_radius_m + 0.003);
+    let (lo, hi) = (-shape.head_back_m - 0.008, -shape.head_back_m + 0.03);
+    let mut m = 0usize;
+    for i in 0..n {
+        let rel = scratch.points[i] - tip;
+        let s = rel.dot(&a);
+        let (x, y) = (rel.dot(&ex), rel.dot(&ey));
+        if s >= lo && s <= hi && x.abs() < in_x && y.abs() < in_y && x * x + y * y > out_r * out_r {
+            scratch.axial[m] = s;
+            m += 1;
+        }
+    }
+    if m < MIN_BACK_FACE_POINTS {
+        return None;
+    }
+    let v = &mut scratch.axial[..m];
+    v.sort_unstable_by(|x, y| x.total_cmp(y));
+    let (mut best, mut best_len, mut j) = (0usize, 0usize, 0usize);
+    for i in 0..m {
+        while j < m && v[j] <= v[i] + 0.01 {
+            j += 1;
+        }
+        if j - i > best_len {
+            best = i;
+            best_len = j - i;
+        }
+    }
+    (best_len >= MIN_BACK_FACE_POINTS).then(|| v[best + best_len / 2])
 }
 
 /// The lateral correction of the head box fit, in probe x and y, and how well the points sit on the faces.

@@ -25,6 +25,7 @@ use supine_drivers::SourceErrorKind;
 use supine_drivers::oni::OniReader;
 
 use crate::sequence::SequenceMeta;
+use crate::sequence::calibration::CalibrationFrameTruth;
 
 /// Pose counts the report covers (keys of the JSON report).
 pub const POSE_COUNTS: [usize; 3] = [6, 10, 20];
@@ -201,10 +202,25 @@ pub struct Outcome {
     pub tip_depth_bias_mm: Option<f32>,
     /// Mean distance of the arm's reported tips (dwell means) from the true tips, mm: encoder and kinematic error.
     pub arm_tip_error_mm: Option<f32>,
+    /// Per pose of the second pass (in order): the detected tip's error against the true tip in the true probe
+    /// frame (across the head's width, across its thickness, along the axis toward the tip), mm, and the pose's
+    /// residual in the solve, mm (empty when refused before the solve).
+    pub pose_errors_mm: Vec<PoseError>,
     /// Frame counters of the second pass.
     pub frames_still: u32,
     /// Frames without a tip.
     pub frames_no_tip: u32,
+}
+
+/// One pose's detection error and solve residual (see [`Outcome::pose_errors_mm`]).
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct PoseError {
+    /// Detected minus true tip in the true probe frame `[x, y, axial]`, mm.
+    pub probe_xyz: [f32; 3],
+    /// Residual of the pose in the solve, mm (`None`: no solve).
+    pub residual: Option<f32>,
+    /// Whether the solve used the pose.
+    pub inlier: bool,
 }
 
 /// Evaluate one sequence directory at every pose count.
@@ -223,6 +239,7 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
     let truth = cal.robot_base_from_camera.to_isometry();
     let nominal = cal.robot_base_from_camera_nominal.to_isometry();
     let (arm, _) = read_arm_capture(&dir.join("arm.cobs"))?;
+    let truth_rotations = pose_rotations(dir, cal.poses_robot_base.len())?;
     let oni = dir.join("sequence.oni");
     let max = *POSE_COUNTS.iter().max().unwrap_or(&20);
     let keyframes = if nominal_guess {
@@ -250,6 +267,7 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
             tip_detection_error_mm: None,
             tip_depth_bias_mm: None,
             arm_tip_error_mm: None,
+            pose_errors_mm: Vec::new(),
             frames_still: 0,
             frames_no_tip: 0,
         };
@@ -303,8 +321,23 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
         o.tip_detection_error_mm = det;
         o.tip_depth_bias_mm = bias;
         o.arm_tip_error_mm = arm_err;
-        let sol = solve_poses(&second[..n], false);
-        match sol {
+        let sol = supine_drivers::calib_host::solve_poses(&second[..n], &SolveOptions::default());
+        let per_pose = probe_frame_errors(&second[..n], &cal.poses_robot_base, &truth_rotations, &truth);
+        o.pose_errors_mm = per_pose
+            .iter()
+            .enumerate()
+            .map(|(i, e)| PoseError {
+                probe_xyz: e.map(|v| (v * 10.0).round() / 10.0),
+                residual: sol.as_ref().ok().map(|(_, r, _)| (r[i] * 1e4).round() / 10.0),
+                inlier: false,
+            })
+            .collect();
+        if let Ok((_, _, inl)) = &sol {
+            for (p, &i) in o.pose_errors_mm.iter_mut().zip(inl.iter()) {
+                p.inlier = i;
+            }
+        }
+        match sol.map(|(s, _, _)| s) {
             Ok(s) => {
                 let t = s.robot_base_from_camera;
                 o.inliers = s.inliers;
@@ -349,6 +382,57 @@ fn tip_errors(
         mean(bias.into_iter()),
         mean(arm.into_iter()),
     )
+}
+
+/// The true `camera_from_probe` rotation of every pose (its first dwell frame in `truth.jsonl`).
+fn pose_rotations(dir: &Path, poses: usize) -> Result<Vec<Option<nalgebra::Matrix3<f32>>>> {
+    let path = dir.join("truth.jsonl");
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = vec![None; poses];
+    for (i, line) in text.lines().enumerate() {
+        let t: CalibrationFrameTruth = serde_json::from_str(line)
+            .with_context(|| format!("parsing {} line {}", path.display(), i + 1))?;
+        if let Some(slot) = t.pose.and_then(|p| out.get_mut(p as usize))
+            && slot.is_none()
+        {
+            let m = t.camera_from_probe;
+            *slot = Some(nalgebra::Matrix3::new(
+                m[0][0], m[0][1], m[0][2], m[1][0], m[1][1], m[1][2], m[2][0], m[2][1], m[2][2],
+            ));
+        }
+    }
+    Ok(out)
+}
+
+/// Each pose's detection error in the true probe frame (mm), matched to the nearest true pose tip as in
+/// [`tip_errors`]; NaN where no true pose is near.
+fn probe_frame_errors(
+    poses: &[PoseObservation],
+    true_tips: &[[f32; 3]],
+    rotations: &[Option<nalgebra::Matrix3<f32>>],
+    truth: &Isometry3,
+) -> Vec<[f32; 3]> {
+    let camera_from_robot_base = truth.inverse();
+    poses
+        .iter()
+        .map(|p| {
+            let nearest = true_tips
+                .iter()
+                .enumerate()
+                .map(|(i, t)| (i, Point3::from(*t)))
+                .min_by(|(_, a), (_, b)| (a - p.robot_base).norm().total_cmp(&(b - p.robot_base).norm()));
+            match nearest.filter(|(_, t)| (t - p.robot_base).norm() < 0.02) {
+                Some((i, t)) => match rotations.get(i).copied().flatten() {
+                    Some(r) => {
+                        let e = r.transpose() * (p.camera - camera_from_robot_base * t) * 1000.0;
+                        [e.x, e.y, e.z]
+                    }
+                    None => [f32::NAN; 3],
+                },
+                None => [f32::NAN; 3],
+            }
+        })
+        .collect()
 }
 
 fn torso_error_mm(est: &Isometry3, truth: &Isometry3, points: &[[f32; 3]]) -> f32 {

@@ -432,6 +432,7 @@ mod tests {
         let k = Intrinsics::KINECT_V1;
         let mut scratch: Box<TipScratch<8192>> = Box::new(TipScratch::new());
         let mut errors = Vec::new();
+        let mut far = 0;
         for t in &lines {
             let frame = reader.read_frame().unwrap();
             if t.pose.is_none() {
@@ -450,6 +451,24 @@ mod tests {
             };
             if let Ok(d) = detect_tip(&frame, &k, &prior, &TipOptions::default(), &mut scratch) {
                 errors.push((d.tip_camera - tip).norm());
+                // A sure prior 4 cm deeper along the probe: the head is still in its search cylinder, but the tip
+                // found there is farther from the expected one than the prior allows.
+                let deeper = TipPrior {
+                    tip_camera: tip + rot * Vector3::new(0.0, 0.0, 0.04),
+                    uncertainty_m: 0.005,
+                    ..prior
+                };
+                match detect_tip(&frame, &k, &deeper, &TipOptions::default(), &mut scratch) {
+                    Err(TipError::FarFromPrior { distance_m }) => {
+                        assert!(distance_m > 0.035, "{distance_m}");
+                        far += 1;
+                    }
+                    Ok(d) => panic!(
+                        "a tip {} m from a sure prior",
+                        (d.tip_camera - deeper.tip_camera).norm()
+                    ),
+                    Err(_) => {}
+                }
             }
             // Nothing there: a prior 40 cm to the side finds no probe (or only refusals).
             let away = TipPrior {
@@ -463,6 +482,11 @@ mod tests {
             );
         }
         assert!(errors.len() >= 20, "{} detections", errors.len());
+        assert!(
+            2 * far >= errors.len(),
+            "{far} of {} refused as far from the prior",
+            errors.len()
+        );
         errors.sort_by(f32::total_cmp);
         let median = errors[errors.len() / 2];
         assert!(median < 0.005, "median tip error {median} m");
