@@ -412,10 +412,15 @@ fn live_view_serves_subscribed_channels_and_drops_for_slow_clients() {
     assert!(live.wait_for_subscriber(Duration::from_secs(20)));
 
     // Publish the whole recording at once: the client reads nothing meanwhile, so most frames are dropped for it,
-    // and publish never waits.
+    // and publish never waits. The frames are made first: made between publishes (the tracker under qemu on a
+    // loaded machine), they took longer than the server's 5 s write timeout, which then let the client go.
     let mut clock = LogClock::default();
+    let mut frames = Vec::new();
+    record_demo(|r| frames.push(encode(r, clock.log_ns(r.capture), None)));
     let started = std::time::Instant::now();
-    record_demo(|r| live.publish(encode(r, clock.log_ns(r.capture), None)));
+    for frame in frames {
+        live.publish(frame);
+    }
     let publish_time = started.elapsed();
     let stats = live.stats();
     assert_eq!(stats.queued + stats.dropped, 60, "{stats:?}");
