@@ -814,24 +814,15 @@ impl<'m, 's> Tracker<'m, 's> {
         let _ = starts.push(forest);
         let mut best: Option<(f32, Isometry3)> = None;
         for start in starts {
-            let (pose, fit) = torso_icp::fit_torso(
-                frame,
-                &self.k,
-                self.scratch.torso_vertices,
-                self.scratch.torso_normals,
-                start,
-                &self.cfg.icp,
-                &params,
-                &self.cfg.budget,
-                self.cfg.icp.acquire_min_iterations,
-                clock,
-                watch,
-            );
-            if fit.association.pairs < self.cfg.icp.min_pairs as usize || !lies_on_bed(&pose, bed) {
+            let min_iterations = self.cfg.icp.acquire_min_iterations;
+            let budget = self.cfg.budget;
+            let Some((pose, support)) =
+                self.fit_lying(frame, bed, start, &params, &budget, min_iterations, clock, watch)
+            else {
                 continue;
-            }
-            if best.is_none_or(|(s, _)| fit.support() > s) {
-                best = Some((fit.support(), pose));
+            };
+            if best.is_none_or(|(s, _)| support > s) {
+                best = Some((support, pose));
             }
         }
         best.map(|(_, pose)| pose * body_from_torso.inverse())
@@ -1046,7 +1037,6 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) -> heapless::Vec<Isometry3, { bed_search::KEEP + 1 }> {
-        let cfg = &self.cfg.icp;
         let screen = BudgetConfig {
             icp_iterations: bed_search::SCREEN_ITERATIONS,
             ..self.cfg.budget
@@ -1061,29 +1051,48 @@ impl<'m, 's> Tracker<'m, 's> {
             ) {
                 break;
             }
-            let (pose, fit) = torso_icp::fit_torso(
-                frame,
-                &self.k,
-                self.scratch.torso_vertices,
-                self.scratch.torso_normals,
-                start,
-                cfg,
-                params,
-                &screen,
-                bed_search::SCREEN_ITERATIONS,
-                clock,
-                watch,
-            );
-            if fit.association.pairs < cfg.min_pairs as usize || !lies_on_bed(&pose, bed) {
+            let iterations = bed_search::SCREEN_ITERATIONS;
+            let Some((pose, score)) =
+                self.fit_lying(frame, bed, start, params, &screen, iterations, clock, watch)
+            else {
                 continue;
-            }
-            let score = fit.support();
+            };
             if let Some(i) = kept.iter().position(|(s, _)| score > *s) {
                 kept[i..].rotate_right(1);
                 kept[i] = (score, pose);
             }
         }
         kept.iter().filter(|(s, _)| *s > 0.0).map(|(_, p)| *p).collect()
+    }
+
+    /// The torso fit from `start` and its support, when it has enough pairs and lies on the bed.
+    #[allow(clippy::too_many_arguments)] // fit_torso's inputs that differ between the callers
+    fn fit_lying(
+        &self,
+        frame: &DepthFrame<'_>,
+        bed: &BedScene,
+        start: Isometry3,
+        params: &crate::icp::IcpParams,
+        budget: &BudgetConfig,
+        min_iterations: u8,
+        clock: &(impl Clock + ?Sized),
+        watch: &Stopwatch,
+    ) -> Option<(Isometry3, f32)> {
+        let (pose, fit) = torso_icp::fit_torso(
+            frame,
+            &self.k,
+            self.scratch.torso_vertices,
+            self.scratch.torso_normals,
+            start,
+            &self.cfg.icp,
+            params,
+            budget,
+            min_iterations,
+            clock,
+            watch,
+        );
+        (fit.association.pairs >= self.cfg.icp.min_pairs as usize && lies_on_bed(&pose, bed))
+            .then(|| (pose, fit.support()))
     }
 
     /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once
