@@ -138,14 +138,7 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
         train_fraction: args.train_fraction,
         previews: args.previews.min(args.bodies),
         noise: if let Some(path) = &args.noise {
-            let bytes =
-                std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
-            let noise: KinectNoise = serde_json::from_slice(&bytes)
-                .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
-            noise
-                .validate()
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            noise
+            KinectNoise::from_file(path)?
         } else if args.legacy_noise {
             KinectNoise::LEGACY
         } else if args.registered {

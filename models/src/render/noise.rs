@@ -154,6 +154,17 @@ impl KinectNoise {
         border_px: [7, 29, 28, 15],
     };
 
+    /// A noise model from a JSON file (a `KinectNoise`, as in dataset.json's `config.noise`), validated.
+    pub fn from_file(path: &std::path::Path) -> anyhow::Result<KinectNoise> {
+        let bytes = std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
+        let noise: KinectNoise =
+            serde_json::from_slice(&bytes).map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
+        noise
+            .validate()
+            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        Ok(noise)
+    }
+
     /// Check every parameter (a noise model read from a manifest or a `--noise` file): a clear message naming the
     /// first bad field, so a wrong file is an error rather than a panic or a silently broken image.
     pub fn validate(&self) -> Result<(), String> {

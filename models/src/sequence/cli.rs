@@ -176,14 +176,7 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         sweep_max_occluded: (args.occluder && args.sweep_max_occluded < 1.0)
             .then_some(args.sweep_max_occluded),
         noise: if let Some(path) = &args.noise {
-            let bytes =
-                std::fs::read(path).map_err(|e| anyhow::anyhow!("reading {}: {e}", path.display()))?;
-            let noise: crate::render::noise::KinectNoise = serde_json::from_slice(&bytes)
-                .map_err(|e| anyhow::anyhow!("parsing {}: {e}", path.display()))?;
-            noise
-                .validate()
-                .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
-            noise
+            crate::render::noise::KinectNoise::from_file(path)?
         } else if args.legacy_noise {
             crate::render::noise::KinectNoise::LEGACY
         } else if args.registered {
