@@ -12,8 +12,10 @@
 //! the [`state`] machine decides what the health message says; packets are stamped with the frame's capture time.
 //!
 //! A fit is good when its residual is small, most pairs lie within the shape's mismatch and the camera does not
-//! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) a good fit is
-//! trusted at once only when its residual is very low, otherwise once consecutive frames agree on it; while
+//! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) the fit starts
+//! from the forest's pose, that pose turned about the body axis, and the torso laid on the bed around it
+//! ([`bed_search`]); a good fit is trusted at once only when its residual is very low, otherwise once consecutive
+//! frames agree on it; while
 //! tracking, a good fit from a start other than the temporal one that lands far from it is not trusted (the
 //! patient does not jump). Pixels without depth over the torso count as hidden, so a torso under the arm's shadow
 //! coasts as occluded instead of being lost.
@@ -24,7 +26,8 @@
 //!
 //! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
 //! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
-//! (20-40 µs each), probe mapping (tens of µs) and five packets.
+//! (20-40 µs each), probe mapping (tens of µs) and five packets; an acquiring frame adds the bed search's screening
+//! (1-2 ms).
 
 pub mod accuracy;
 pub mod bed_search;
