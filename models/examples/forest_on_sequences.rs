@@ -1,9 +1,10 @@
 //! Why the joint forest is worse on tracking-sequence frames than on its own dataset views: runs a forest on the
 //! first frames of each sequence under several clips (the tracker's full-frame bed-plane clip, the same restricted to
-//! the patient's box as the dataset crops it, that box with everything outside it read as no depth as in training)
+//! the patient's box as the dataset crops it, that box with everything outside it read as no depth as in training, the
+//! head section dropped, the tracker's volume of interest as clip planes, and the tracker's height ceiling)
 //! and reports the forest's mean point error and where the samples fall (near the true torso surface or not).
 //!
-//! `cargo run --release -p supine-models --example forest_on_sequences -- SEQ_DIR_OR_PARENT [FOREST] [FRAMES]`
+//! `cargo run --release -p supine-models --example forest_on_sequences -- SEQ_DIR_OR_PARENT [FOREST] [FRAMES] [MARGIN_PX] [CEILING_M]`
 //! Cost: per frame and clip one forest estimate (~1 ms) and a nearest-vertex search per sample (~5 ms).
 
 use anyhow::{Context, Result, bail};
@@ -14,7 +15,7 @@ use supine_core::depth::DepthFrame;
 use supine_core::forest::feature::DepthImage;
 use supine_core::forest::infer::{self, InferConfig, Method, Workspace};
 use supine_core::forest::model::ForestView;
-use supine_core::forest::sample::{Clip, PixelRect, SamplePixel, sample_pixels};
+use supine_core::forest::sample::{Ceiling, Clip, PixelRect, SamplePixel, sample_pixels};
 use supine_core::geometry::Plane;
 use supine_core::planes::{self, BedScene, PlaneConfig};
 use supine_drivers::SourceErrorKind;
@@ -80,17 +81,21 @@ fn voi_clip_planes(bed: &BedScene) -> [Plane; 7] {
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(root) = args.first() else {
-        bail!("usage: forest_on_sequences SEQ_DIR_OR_PARENT [FOREST] [FRAMES] [MARGIN_PX]");
+        bail!("usage: forest_on_sequences SEQ_DIR_OR_PARENT [FOREST] [FRAMES] [MARGIN_PX] [CEILING_M]");
     };
     let forest_path = PathBuf::from(args.get(1).map_or("models/artifacts/joints.jfor", |s| s.as_str()));
     let frames: usize = args.get(2).map_or(Ok(10), |s| s.parse()).context("FRAMES")?;
     let margin: f32 = args.get(3).map_or(Ok(48.0), |s| s.parse()).context("MARGIN_PX")?;
+    let height_m: f32 = args
+        .get(4)
+        .map_or(Ok(supine_core::tracker::FOREST_CEILING_M), |s| s.parse())
+        .context("CEILING_M")?;
     let bytes = std::fs::read(&forest_path).with_context(|| format!("reading {}", forest_path.display()))?;
     let forest = ForestView::parse(&bytes).map_err(|e| anyhow::anyhow!("{}: {e}", forest_path.display()))?;
     let k = Intrinsics::KINECT_V1;
-    let names = ["full", "box", "box_masked", "mattress_only", "voi"];
+    let names = ["full", "box", "box_masked", "mattress_only", "voi", "ceiling"];
     let mut ws = Box::new(Workspace::new());
-    let mut total = [Tally::default(); 5];
+    let mut total = [Tally::default(); 6];
     println!("seq    {}", names.map(|n| format!("{n:>34}")).join(""));
     for dir in sequence_dirs(&PathBuf::from(root))? {
         let seq = TrackingTruth::load(&dir)?;
@@ -101,7 +106,7 @@ fn main() -> Result<()> {
             .robot_base_from_camera()
             .map(|t| t.inverse().rotation * Vector3::z());
         let mut voi_planes: Option<Vec<Plane>> = None;
-        let mut tally = [Tally::default(); 5];
+        let mut tally = [Tally::default(); 6];
         for f in 0..frames {
             let frame = match reader.read_frame() {
                 Ok(fr) => fr,
@@ -176,8 +181,12 @@ fn main() -> Result<()> {
                     method: Method::Refined,
                 };
                 let masked = Masked { frame: &frame, rect };
+                // What the tracker's forest reads (`TrackerConfig::forest_ceiling_m`), here over the true planes.
+                let ceiling = Ceiling::new(&frame, &k, &planes, height_m);
                 let est = if i == 2 {
                     infer::estimate(&forest, &masked, &k, &clip, &cfg, &[None; 6], &mut ws)
+                } else if i == 5 {
+                    infer::estimate(&forest, &ceiling, &k, &clip, &cfg, &[None; 6], &mut ws)
                 } else {
                     infer::estimate(&forest, &frame, &k, &clip, &cfg, &[None; 6], &mut ws)
                 };
@@ -195,7 +204,11 @@ fn main() -> Result<()> {
                 }
                 // The same draw as estimate made, to see where the samples fall.
                 let mut px = vec![SamplePixel::default(); cfg.samples];
-                let n = sample_pixels(&frame, &k, &clip, seed, &mut px);
+                let n = if i == 5 {
+                    sample_pixels(&ceiling, &k, &clip, seed, &mut px)
+                } else {
+                    sample_pixels(&frame, &k, &clip, seed, &mut px)
+                };
                 for s in &px[..n] {
                     let p = Vector3::from(s.p);
                     let near = torso
