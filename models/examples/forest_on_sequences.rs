@@ -47,6 +47,8 @@ struct Tally {
     samples: u64,
     near_torso: u64,
     in_box: u64,
+    /// Wall time of the estimates, µs (an upper bound on a shared machine).
+    us: f64,
     point_sum: [f64; 6],
 }
 
@@ -183,6 +185,7 @@ fn main() -> Result<()> {
                 let masked = Masked { frame: &frame, rect };
                 // What the tracker's forest reads (`TrackerConfig::forest_ceiling_m`), here over the true planes.
                 let ceiling = Ceiling::new(&frame, &k, &planes, height_m);
+                let started = std::time::Instant::now();
                 let est = if i == 2 {
                     infer::estimate(&forest, &masked, &k, &clip, &cfg, &[None; 6], &mut ws)
                 } else if i == 5 {
@@ -190,6 +193,7 @@ fn main() -> Result<()> {
                 } else {
                     infer::estimate(&forest, &frame, &k, &clip, &cfg, &[None; 6], &mut ws)
                 };
+                tally.us += started.elapsed().as_secs_f64() * 1e6;
                 tally.frames += 1;
                 for (j, (e, p)) in est.iter().zip(&t.salient_camera).enumerate() {
                     match e {
@@ -252,6 +256,7 @@ fn main() -> Result<()> {
             a.samples += b.samples;
             a.near_torso += b.near_torso;
             a.in_box += b.in_box;
+            a.us += b.us;
         }
     }
     let mean_of_seq = |t: &Tally| t.err_sum / t.err_n.max(1) as f64;
@@ -269,5 +274,11 @@ fn main() -> Result<()> {
             .collect::<Vec<_>>()
             .join("")
     );
+    let times: Vec<String> = names
+        .iter()
+        .zip(&total)
+        .map(|(n, t)| format!("{n} {:.0}", t.us / t.frames.max(1) as f64))
+        .collect();
+    println!("estimate wall time per frame, us: {}", times.join(", "));
     Ok(())
 }
