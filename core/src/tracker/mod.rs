@@ -44,7 +44,7 @@ use crate::fit::{self, FitParams};
 use crate::forest::infer::{self, InferConfig, Method, PointEstimate, Workspace};
 use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
-use crate::forest::sample::{Clip, PixelRect};
+use crate::forest::sample::{Ceiling, Clip, PixelRect};
 use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
 use crate::planes::{self, BedScene, PlaneConfig};
 use crate::probe::{self, ProbeMapping};
@@ -62,6 +62,10 @@ use state::{FitQuality, StateLimits, StateMachine};
 use torso_icp::{TorsoFit, TorsoIcpConfig};
 
 const P: usize = SalientPoint::COUNT;
+/// Default [`TrackerConfig::forest_ceiling_m`]: chosen on the validation sequences (`docs/joint-forest.md`, 0.4 m cut
+/// parts of some patients, 0.5 m none measurably); a patient lying on the bed stays well below it, the arm's upper
+/// links do not.
+pub const FOREST_CEILING_M: f32 = 0.6;
 
 /// Which parts of the loop run (the evaluation compares them; the product is [`Variant::ForestIcpFeedback`]).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -115,6 +119,9 @@ pub struct TrackerConfig {
     pub up_camera: Option<Vector3>,
     /// Forest samples per frame (0: the model's own).
     pub forest_samples: u16,
+    /// The forest reads pixels higher than this above the mattress and head section as no depth (the arm's links
+    /// over the patient), metres; 0 or less: off.
+    pub forest_ceiling_m: f32,
     /// Standard deviation of the feedback prior per axis, metres.
     pub prior_sigma_m: f32,
     /// Torso ICP.
@@ -145,6 +152,7 @@ impl Default for TrackerConfig {
             planes: PlaneConfig::default(),
             up_camera: None,
             forest_samples: 0,
+            forest_ceiling_m: FOREST_CEILING_M,
             prior_sigma_m: 0.05,
             icp: TorsoIcpConfig::default(),
             limits: StateLimits::default(),
@@ -573,15 +581,28 @@ impl<'m, 's> Tracker<'m, 's> {
             seed: mix_seed(self.cfg.seed, self.frames as u64),
             method: Method::Refined,
         };
-        infer::estimate(
-            &self.models.joints,
-            frame,
-            &self.k,
-            &clip,
-            &cfg,
-            priors,
-            self.scratch.forest,
-        )
+        if self.cfg.forest_ceiling_m > 0.0 {
+            let img = Ceiling::new(frame, &self.k, &planes, self.cfg.forest_ceiling_m);
+            infer::estimate(
+                &self.models.joints,
+                &img,
+                &self.k,
+                &clip,
+                &cfg,
+                priors,
+                self.scratch.forest,
+            )
+        } else {
+            infer::estimate(
+                &self.models.joints,
+                frame,
+                &self.k,
+                &clip,
+                &cfg,
+                priors,
+                self.scratch.forest,
+            )
+        }
     }
 
     /// Process one frame: `arm` is the newest arm state, `clock` times the stages (core reads no clock itself).
