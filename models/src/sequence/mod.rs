@@ -260,9 +260,6 @@ fn shoulder_within(
                     worst = worst.max(1.0 - torso1 as f32 / torso0 as f32);
                 }
             }
-            if worst > limit {
-                break;
-            }
         }
         if worst <= limit {
             return (shoulder, worst);
@@ -638,6 +635,48 @@ mod tests {
             "belly point rises"
         );
         assert_eq!(MANNEQUIN_PARTS[2], "chest");
+    }
+
+    #[test]
+    fn the_shoulder_is_the_first_whose_sweep_hides_at_most_the_limit() {
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let patient = Mannequin::build(&Mannequin::sample_params(&mut rng));
+        let bed = BedParams::sample(&mut rng, 0.0, 0.0);
+        let scene = Scene::new(&patient.body, bed);
+        let view = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
+        let cfw = view.camera_from_world(scene.midline_y(), bed.mattress_top);
+        let eye = cfw.inverse().translation.vector;
+        let torso: Vec<u8> = MANNEQUIN_PARTS
+            .iter()
+            .enumerate()
+            .filter(|(_, n)| matches!(**n, "chest" | "abdomen" | "belly" | "pelvis"))
+            .map(|(i, _)| i as u8)
+            .collect();
+        let is_torso = |p: u8| torso.contains(&p);
+        let mut renderer = Renderer::new(Intrinsics::KINECT_V1);
+        // Near the camera's line of sight (the full-occlusion park's shoulder) and the usual one beside the bed.
+        let near = episodes::shoulder_for_full_occlusion(&scene, eye, 3).expect("a park shoulder");
+        let usual = crate::dataset::sample_shoulder(&scene, scene.torso_centre()[0], &mut rng);
+        let mut hides = |c: &[Vector3<f32>], limit| {
+            shoulder_within(&scene, &cfw, &mut renderer, eye, &is_torso, c, limit)
+        };
+        let (_, w_near) = hides(&[near], 1.0);
+        let (_, w_usual) = hides(&[usual], 1.0);
+        let ((hi, w_hi), (lo, w_lo)) = if w_near > w_usual {
+            ((near, w_near), (usual, w_usual))
+        } else {
+            ((usual, w_usual), (near, w_near))
+        };
+        assert!(
+            w_hi > w_lo + 0.02 && w_lo > 0.0,
+            "the two shoulders hide {w_hi} and {w_lo}"
+        );
+        // The first candidate that holds the limit wins, even after one that does not.
+        let limit = 0.5 * (w_hi + w_lo);
+        assert_eq!(hides(&[hi, lo], limit), (lo, w_lo));
+        assert_eq!(hides(&[lo, hi], 1.0), (lo, w_lo));
+        // None holds: the one that hides least.
+        assert_eq!(hides(&[hi, lo], 0.5 * w_lo), (lo, w_lo));
     }
 
     #[test]
