@@ -41,6 +41,7 @@ use crate::calib::solve::{Pair, kabsch};
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::fit::{self, FitParams};
+use crate::forest::feature::DepthImage;
 use crate::forest::infer::{self, InferConfig, Method, PointEstimate, Workspace};
 use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
@@ -583,26 +584,29 @@ impl<'m, 's> Tracker<'m, 's> {
         };
         if self.cfg.forest_ceiling_m > 0.0 {
             let img = Ceiling::new(frame, &self.k, &planes, self.cfg.forest_ceiling_m);
-            infer::estimate(
-                &self.models.joints,
-                &img,
-                &self.k,
-                &clip,
-                &cfg,
-                priors,
-                self.scratch.forest,
-            )
+            self.estimate_on(&img, &clip, &cfg, priors)
         } else {
-            infer::estimate(
-                &self.models.joints,
-                frame,
-                &self.k,
-                &clip,
-                &cfg,
-                priors,
-                self.scratch.forest,
-            )
+            self.estimate_on(frame, &clip, &cfg, priors)
         }
+    }
+
+    /// The forest's six points on `img` (generic, so the per-pixel reads stay static calls).
+    fn estimate_on<D: DepthImage + ?Sized>(
+        &mut self,
+        img: &D,
+        clip: &Clip<'_>,
+        cfg: &InferConfig,
+        priors: &[Option<Prior>; P],
+    ) -> [Option<PointEstimate>; P] {
+        infer::estimate(
+            &self.models.joints,
+            img,
+            &self.k,
+            clip,
+            cfg,
+            priors,
+            self.scratch.forest,
+        )
     }
 
     /// Process one frame: `arm` is the newest arm state, `clock` times the stages (core reads no clock itself).
@@ -772,14 +776,10 @@ impl<'m, 's> Tracker<'m, 's> {
                 }
             }
         }
-        let Some(body_from_torso) = self.build_torso(&z) else {
+        let Some((body_from_torso, raw)) = self.build_torso(&z) else {
             // The scratch lengths were checked when the tracker was built.
             return;
         };
-        let mut raw = [0.0f32; SHAPE_COMPONENTS];
-        for (i, r) in raw.iter_mut().enumerate() {
-            *r = z[i] * body.sigma(i);
-        }
         let torso_from_body = body_from_torso.inverse();
         let salient_torso = body
             .salient_points(&raw)
@@ -798,8 +798,9 @@ impl<'m, 's> Tracker<'m, 's> {
         self.machine.init_done();
     }
 
-    /// Shape the torso model with `z` (σ units) into the scratch buffers; its `body_from_torso`.
-    fn build_torso(&mut self, z: &[f32; SHAPE_COMPONENTS]) -> Option<Isometry3> {
+    /// Shape the torso model with `z` (σ units) into the scratch buffers; its `body_from_torso` and the raw
+    /// (unscaled) coefficients.
+    fn build_torso(&mut self, z: &[f32; SHAPE_COMPONENTS]) -> Option<(Isometry3, [f32; SHAPE_COMPONENTS])> {
         let body = self.models.body;
         let mut raw = [0.0f32; SHAPE_COMPONENTS];
         for (i, r) in raw.iter_mut().enumerate() {
@@ -815,7 +816,7 @@ impl<'m, 's> Tracker<'m, 's> {
             },
         )
         .ok()
-        .map(|s| s.body_from_torso())
+        .map(|s| (s.body_from_torso(), raw))
     }
 
     /// Where the shape refinement starts (`camera_from_body`): the forest's points place the model up to 20 cm and
@@ -831,7 +832,7 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) -> Option<Isometry3> {
-        let body_from_torso = self.build_torso(z)?;
+        let (body_from_torso, _) = self.build_torso(z)?;
         let forest = forest_start * body_from_torso;
         let params = torso_icp::icp_params(&self.cfg.icp, bed.mattress);
         let mut starts = self.screen_bed_starts(frame, &forest, bed, &params, clock, watch);
