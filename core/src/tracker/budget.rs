@@ -41,7 +41,8 @@ impl Default for BudgetConfig {
 /// The stages of a frame, in order.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stage {
-    /// Init phase work (bed planes, shape estimate, refinement); zero on tracking frames.
+    /// Init phase work (bed planes, shape estimate, refinement) and the lock refits on the first tracked frames;
+    /// zero on other tracking frames.
     Init,
     /// Joint forest and mean-shift.
     Forest,
@@ -131,7 +132,7 @@ pub struct BudgetCounters {
     pub dropped: u32,
     /// Frames in which ICP iterations were cut.
     pub icp_cuts: u32,
-    /// Init phases whose shape refinement was skipped for time.
+    /// Shape refinements (the init phase's or a lock refit) skipped for time.
     pub refinements_skipped: u32,
 }
 

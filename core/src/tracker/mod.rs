@@ -114,6 +114,11 @@ pub struct TrackerConfig {
     /// sequences it tracked more frames (0.745 against 0.717) but with a larger torso error (20.9 against 16.2 mm;
     /// docs/tracking.md).
     pub search_shape_start: bool,
+    /// Shape refits (Eq. 7, plain: no prior but λ's) on the first frames tracked after the init phase, averaged and
+    /// then built into the torso model (0: off). The init phase's refinement starts from the forest's points, which
+    /// on a view with the arm can be 15-25 cm off, so it barely moves the shape; a refit from a confirmed tracked
+    /// pose starts where ICP already holds the torso (docs/tracking.md, "Shape refit on lock").
+    pub lock_refits: u8,
     /// Bed-plane search.
     pub planes: PlaneConfig,
     /// Up in the camera frame when known (from the calibration), for the bed search.
@@ -150,6 +155,7 @@ impl Default for TrackerConfig {
             known_shape: None,
             torso_coeffs,
             search_shape_start: false,
+            lock_refits: 3,
             planes: PlaneConfig::default(),
             up_camera: None,
             forest_samples: 0,
@@ -290,6 +296,12 @@ struct Init {
     bed: Option<BedScene>,
     shape_sum: [f32; SHAPE_COMPONENTS],
     shape_n: u16,
+    /// Lock refits still to run (set when the init phase estimated the shape).
+    refits_left: u8,
+    /// Sum of the lock refits' shapes so far, how many, and the last refit's `camera_from_body`.
+    refit_sum: [f32; SHAPE_COMPONENTS],
+    refit_n: u8,
+    refit_pose: Option<Isometry3>,
 }
 
 impl Init {
@@ -298,6 +310,10 @@ impl Init {
             bed: None,
             shape_sum: [0.0; SHAPE_COMPONENTS],
             shape_n: 0,
+            refits_left: 0,
+            refit_sum: [0.0; SHAPE_COMPONENTS],
+            refit_n: 0,
+            refit_pose: None,
         }
     }
 }
@@ -795,7 +811,79 @@ impl<'m, 's> Tracker<'m, 's> {
         });
         self.shape_revision = self.shape_revision.wrapping_add(1);
         self.last_shape_frame = None;
+        self.init.refits_left = if observed.is_some() {
+            self.cfg.lock_refits
+        } else {
+            0
+        };
         self.machine.init_done();
+    }
+
+    /// One lock refit: Eq. 7 from the tracked pose `camera_from_torso` and the init phase's shape; after
+    /// the last one the refits' mean shape becomes the torso model (a new shape revision) and the pose moves to the
+    /// last refit's. A refit that fails still counts; one that does not fit in the budget waits for the next frame.
+    fn refit_on_lock(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        t: &TorsoModel,
+        camera_from_torso: Isometry3,
+        clock: &(impl Clock + ?Sized),
+        watch: &Stopwatch,
+    ) {
+        if watch.elapsed(clock) > self.cfg.budget.frame_us / 2 {
+            self.counters.refinements_skipped += 1;
+            return;
+        }
+        self.init.refits_left -= 1;
+        let body = self.models.body;
+        // From a confirmed pose: drop pairs the camera sees far behind the model, as the temporal fit does. Plain
+        // fitting (no pull toward the init estimate, only λ's toward the mean body): on the validation sequences
+        // the init estimate is close to the mean and carries little, and holding the non-torso coefficients at it
+        // left torso errors 1.4x as large (docs/tracking.md, "Shape refit on lock").
+        let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, t.bed.mattress));
+        if let Ok(r) = fit::fit_shape(
+            &body,
+            frame,
+            &self.k,
+            &t.shape,
+            camera_from_torso * t.body_from_torso.inverse(),
+            &params,
+            self.scratch.fit_points,
+            self.scratch.fit_normals,
+        ) {
+            for (s, x) in self.init.refit_sum.iter_mut().zip(r.shape) {
+                *s += x;
+            }
+            self.init.refit_n += 1;
+            self.init.refit_pose = Some(r.camera_from_model);
+        }
+        if self.init.refits_left > 0 || self.init.refit_n == 0 {
+            return;
+        }
+        let Some(camera_from_body) = self.init.refit_pose else {
+            return;
+        };
+        let n = f32::from(self.init.refit_n);
+        let z = self.init.refit_sum.map(|s| s / n);
+        let Some((body_from_torso, raw)) = self.build_torso(&z) else {
+            return;
+        };
+        let torso_from_body = body_from_torso.inverse();
+        let salient_torso = body
+            .salient_points(&raw)
+            .map(|p| torso_from_body * Point3::from(p));
+        self.torso = Some(TorsoModel {
+            salient_torso,
+            body_from_torso,
+            shape: z,
+            ..*t
+        });
+        self.pose = Some(camera_from_body * body_from_torso);
+        self.last_good_pose = self.pose;
+        // The support a right fit reaches depends on the shape: measure it afresh.
+        self.support_ref = None;
+        self.shape_revision = self.shape_revision.wrapping_add(1);
+        self.last_shape_frame = None;
     }
 
     /// Shape the torso model with `z` (σ units) into the scratch buffers; its `body_from_torso` and the raw
@@ -1035,7 +1123,16 @@ impl<'m, 's> Tracker<'m, 's> {
             }
             return;
         }
-        let Some(pose) = self.pose else {
+        if quality == FitQuality::Good
+            && variant != Variant::Forest
+            && self.init.refits_left > 0
+            && self.machine.state() == TrackerState::Tracking
+            && let Some(pose) = self.pose
+        {
+            self.refit_on_lock(frame, &t, pose, clock, watch);
+            watch.lap(clock, Stage::Init);
+        }
+        let (Some(pose), Some(t)) = (self.pose, self.torso) else {
             return;
         };
         report.camera_from_torso = Some(pose);

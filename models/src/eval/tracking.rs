@@ -59,6 +59,9 @@ pub struct TrackingEvalArgs {
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
     pub search_shape_start: bool,
+    /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
+    #[arg(long)]
+    pub lock_refits: Option<u8>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -174,9 +177,7 @@ pub fn run_variant(
     seq: &SequenceData,
     variant: Variant,
     truth_torso: &OwnedTorso,
-    true_shape: bool,
-    search_shape_start: bool,
-    budget_ms: f32,
+    args: &TrackingEvalArgs,
 ) -> Result<(Vec<FrameScore>, Value)> {
     let k = Intrinsics::KINECT_V1;
     let mut cfg = TrackerConfig {
@@ -185,9 +186,12 @@ pub fn run_variant(
         ..TrackerConfig::default()
     };
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
-    cfg.budget.frame_us = (budget_ms * 1000.0) as u32;
-    cfg.search_shape_start = search_shape_start;
-    if true_shape {
+    cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
+    cfg.search_shape_start = args.search_shape_start;
+    if let Some(n) = args.lock_refits {
+        cfg.lock_refits = n;
+    }
+    if args.true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
         for (o, s) in z.iter_mut().zip(&seq.meta.shape) {
             *o = *s;
@@ -432,15 +436,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         let mut per_seq = serde_json::Map::new();
         let mut plots = Vec::new();
         for (variant, acc) in per_variant.iter_mut() {
-            let (scores, summary) = run_variant(
-                &models,
-                &seq,
-                *variant,
-                &truth_torso,
-                args.true_shape,
-                args.search_shape_start,
-                args.budget_ms,
-            )?;
+            let (scores, summary) = run_variant(&models, &seq, *variant, &truth_torso, args)?;
             eprintln!(
                 "{}  {:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm  p50 {:.2} ms",
                 dir.file_name().unwrap_or_default().to_string_lossy(),
