@@ -475,7 +475,7 @@ fn anisotropic_step(
         let q = t.rotation * p.camera.coords;
         let r = p.robot_base.coords - (q + t.translation.vector);
         let d = r.norm();
-        if !(d < thr) {
+        if d.is_nan() || d >= thr {
             continue;
         }
         let hw = if d <= huber { 1.0 } else { huber / d };
