@@ -20,6 +20,20 @@ use supine_models::eval::calibration::{read_arm_capture, run_session, sequence_d
 use supine_models::sequence::SequenceMeta;
 use supine_models::sequence::calibration::CalibrationFrameTruth;
 
+/// One pose: detected and true camera tip, arm and true robot tip, probe-frame error, view in the probe frame,
+/// true `camera_from_probe`, frames and spread.
+type Row = (
+    Point3<f32>,
+    Point3<f32>,
+    Point3<f32>,
+    Point3<f32>,
+    Vector3<f32>,
+    Vector3<f32>,
+    Matrix3<f32>,
+    u32,
+    f32,
+);
+
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
     let data = PathBuf::from(
@@ -136,20 +150,7 @@ fn main() -> Result<()> {
             mean_e.y * 1e3,
             mean_e.z * 1e3
         );
-        let solve_with = |f: &dyn Fn(
-            &(
-                Point3<f32>,
-                Point3<f32>,
-                Point3<f32>,
-                Point3<f32>,
-                Vector3<f32>,
-                Vector3<f32>,
-                Matrix3<f32>,
-                u32,
-                f32,
-            ),
-        ) -> Pair|
-         -> String {
+        let solve_with = |f: &dyn Fn(&Row) -> Pair| -> String {
             let pairs: Vec<Pair> = rows[..m].iter().map(f).collect();
             let (mut res, mut inl) = (vec![0.0; m], vec![false; m]);
             match solve(&pairs, &SolveOptions::default(), &mut res, &mut inl) {
@@ -230,10 +231,7 @@ fn main() -> Result<()> {
                 rotation_error_deg(&t, &truth),
             );
             println!("  aniso w={w:.2}: {te:5.2} mm {re:.3} deg");
-            aniso_sum
-                .entry((w * 100.0) as i32)
-                .or_insert_with(Vec::new)
-                .push((te, re));
+            aniso_sum.entry((w * 100.0) as i32).or_default().push((te, re));
         }
         all_bias.extend(rows.iter().map(|r| r.4));
     }
