@@ -5,7 +5,7 @@
 use supine_core::calib::start::CANDIDATES_PER_POSE;
 use supine_core::calib::{
     ArmSample, Candidate, Pair, PoseObservation, Solution, SolveError, SolveOptions, StartBuffers,
-    StartError, StartOptions, StartScratch, rough_extrinsic, solve,
+    StartError, StartOptions, StartScratch, rough_extrinsic, solve_with_axes,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -60,8 +60,9 @@ pub fn guess_free_start<'f>(
     )
 }
 
-/// Solve `robot_base_from_camera` from dwell-averaged poses with `options`; the per-pose residuals (metres) and
-/// whether each pose was an inlier come back with the solution.
+/// Solve `robot_base_from_camera` from dwell-averaged poses with `options` (each pose's error along its probe
+/// axis weighted by [`SolveOptions::axial_weight`]); the per-pose residuals (metres) and whether each pose was an
+/// inlier come back with the solution.
 pub fn solve_poses(
     poses: &[PoseObservation],
     options: &SolveOptions,
@@ -73,7 +74,8 @@ pub fn solve_poses(
             camera: p.camera,
         })
         .collect();
+    let axes: Vec<_> = poses.iter().map(|p| p.axis_robot_base).collect();
     let (mut residuals, mut inliers) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
-    let s = solve(&pairs, options, &mut residuals, &mut inliers)?;
+    let s = solve_with_axes(&pairs, &axes, options, &mut residuals, &mut inliers)?;
     Ok((s, residuals, inliers))
 }

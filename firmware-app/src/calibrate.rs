@@ -410,12 +410,14 @@ fn parse_extrinsic(text: &str) -> Result<Isometry3, String> {
     ))
 }
 
-/// One JSON object per pose: arm tip (`robot_base_m`), seen tip (`camera_m`), frames, spread, confidence, time.
+/// One JSON object per pose: arm tip (`robot_base_m`), the arm's probe axis (`axis_robot_base`), seen tip
+/// (`camera_m`), frames, spread, confidence, time.
 fn pairs_jsonl(poses: &[PoseObservation]) -> String {
     let mut s = String::new();
     for p in poses {
         let v = serde_json::json!({
             "robot_base_m": [p.robot_base.x, p.robot_base.y, p.robot_base.z],
+            "axis_robot_base": [p.axis_robot_base.x, p.axis_robot_base.y, p.axis_robot_base.z],
             "camera_m": [p.camera.x, p.camera.y, p.camera.z],
             "frames": p.frames,
             "spread_mm": p.spread_m * 1000.0,
@@ -461,6 +463,15 @@ fn read_pairs(path: &Path) -> Result<Vec<PoseObservation>, Failure> {
                 .unwrap_or_default(),
             spread_m: v["spread_mm"].as_f64().unwrap_or(0.0) as f32 * 0.001,
             confidence: v["confidence"].as_f64().unwrap_or(1.0) as f32,
+            // Optional (older files and hand-written pairs lack it): without it the pair counts the same in every
+            // direction.
+            axis_robot_base: match v.get("axis_robot_base") {
+                None => Vector3::zeros(),
+                Some(_) => point("axis_robot_base")?
+                    .coords
+                    .try_normalize(1e-6)
+                    .unwrap_or_else(Vector3::zeros),
+            },
         });
     }
     eprintln!("{} pairs from {}", out.len(), path.display());

@@ -166,6 +166,10 @@ pub struct PoseObservation {
     pub spread_m: f32,
     /// Mean detection confidence.
     pub confidence: f32,
+    /// Mean probe axis (from the wrist toward the tip) the arm reported, `robot_base`, unit; zero when unknown
+    /// (pairs read without it). The solver weights a pair's error along it less: the detector places the tip
+    /// across the axis to a fraction of a millimetre, along it only to 1-3 mm.
+    pub axis_robot_base: Vector3,
 }
 
 /// Groups still, matched frames into poses: a new pose starts when the arm tip is more than `same_pose_m` from the
@@ -189,6 +193,7 @@ pub const DWELL_FRAMES: usize = 32;
 #[derive(Debug, Clone, Copy)]
 struct Accumulator {
     rb: Vector3,
+    axis: Vector3,
     /// Detections (camera, metres) and confidences of the first [`DWELL_FRAMES`] frames.
     cam: [Point3; DWELL_FRAMES],
     conf: [f32; DWELL_FRAMES],
@@ -239,6 +244,7 @@ impl Accumulator {
             first_time: self.first_time,
             spread_m: libm::sqrtf(var),
             confidence: conf / n,
+            axis_robot_base: self.axis.try_normalize(1e-6).unwrap_or_else(Vector3::zeros),
         })
     }
 }
@@ -272,6 +278,7 @@ impl<const P: usize> DwellCollector<P> {
         }
         let c = self.current.get_or_insert(Accumulator {
             rb: Vector3::zeros(),
+            axis: Vector3::zeros(),
             cam: [Point3::origin(); DWELL_FRAMES],
             conf: [0.0; DWELL_FRAMES],
             kept: 0,
@@ -279,6 +286,7 @@ impl<const P: usize> DwellCollector<P> {
             first_time: arm.time,
         });
         c.rb += arm.tip_robot_base.coords;
+        c.axis += arm.axis_robot_base();
         if c.kept < DWELL_FRAMES {
             c.cam[c.kept] = tip_camera;
             c.conf[c.kept] = confidence;
@@ -415,6 +423,8 @@ mod tests {
             poses[0].spread_m
         );
         assert!((poses[1].robot_base.x - 0.2).abs() < 1e-6);
+        // The arm's probe axis comes along (identity orientation: probe z).
+        assert!((poses[0].axis_robot_base - Vector3::z()).norm() < 1e-6);
         assert!((poses[2].robot_base.x - 0.25).abs() < 1e-6);
     }
 

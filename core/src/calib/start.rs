@@ -5,8 +5,10 @@
 //! With the bed empty or the patient still, the arm is the only thing that moves: the per-pixel median depth
 //! over one still frame of each pose ([`median_background`]) is the scene without the arm wherever the arm was
 //! elsewhere in most poses. In each pose's frame, the foreground (nearer than that background) above
-//! the floor or mattress (of the largest planes, [`background_planes`], the one under which the arm's heights
-//! agree best; both are horizontal) is the moving part of the arm.
+//! the floor or mattress (of the largest planes, [`background_planes`], one under which the arm's heights
+//! agree; both are horizontal) is the moving part of the arm. Every plane under which at least four poses agree
+//! is tried as up, and the rough solve that fits the most poses decides (the height vote alone could prefer a
+//! raised head section or a wall where the heights agree by chance).
 //! The probe points down, so its tip is a local lowest point of the foreground: points are taken in rising height
 //! and each joins a lower neighbour's component or starts its own; components with enough points are the
 //! candidates ([`low_points`]). Which candidate is the tip is decided across poses ([`choose_tips`]): the arm's tip
@@ -576,42 +578,89 @@ pub fn rough_extrinsic<'f, const N: usize>(
         }
         nc
     };
-    // Up is the plane under which most poses agree on the tip height (a head section or a wall is tilted, so the
-    // arm's heights do not follow the heights above it).
-    let mut best_plane = (0usize, 0usize);
+    // Up is a plane under which the poses agree on the tip height (a head section or a wall is tilted, so the
+    // arm's heights do not follow the heights above it). The vote alone can prefer a tilted plane when the tips
+    // agree under it by chance (a raised head section under most poses), so every plane whose vote finds enough
+    // tips is solved under, and the solve with the most poses within the threshold (then the smaller RMS) wins.
+    // Without any, the plane with the most agreeing tips gives the error.
+    let mut best_vote = (0usize, 0usize);
+    let mut best: Option<(usize, Solution, usize)> = None;
+    let mut last_err: Option<StartError> = None;
     for (p, plane) in planes[..n_planes].iter().enumerate() {
         let nc = candidates_under(plane, b.candidates, scratch);
-        let (found, _) = choose_tips(
+        let (found, offset) = choose_tips(
             &b.candidates[..nc],
             &robot_z[..poses],
             options.vote_tolerance_m,
             b.chosen,
         );
-        if found > best_plane.1 {
-            best_plane = (p, found);
+        if found > best_vote.1 {
+            best_vote = (p, found);
+        }
+        if found < 4 {
+            continue;
+        }
+        let under = Under {
+            up: plane,
+            arms,
+            robot_z: &robot_z[..poses],
+            offset,
+            options,
+        };
+        match solve_under(&under, &b.candidates[..nc], b.pairs, b.residuals, b.inliers) {
+            Ok(sol) => {
+                if best.as_ref().is_none_or(|(_, bs, _)| {
+                    sol.inliers > bs.inliers
+                        || (sol.inliers == bs.inliers && sol.rms_residual_m < bs.rms_residual_m)
+                }) {
+                    best = Some((p, sol, found));
+                }
+            }
+            Err(e) => {
+                if p == best_vote.0 || last_err.is_none() {
+                    last_err = Some(e);
+                }
+            }
         }
     }
-    let up = planes[best_plane.0];
-    let nc = candidates_under(&up, b.candidates, scratch);
-    let (found, offset) = choose_tips(
-        &b.candidates[..nc],
-        &robot_z[..poses],
-        options.vote_tolerance_m,
-        b.chosen,
-    );
-    if found < 4 {
-        return Err(StartError::TooFewTips { found, poses });
+    match best {
+        Some((_, s, found)) => Ok((s, found)),
+        None if best_vote.1 < 4 => Err(StartError::TooFewTips {
+            found: best_vote.1,
+            poses,
+        }),
+        None => Err(last_err.unwrap_or(StartError::TooFewTips {
+            found: best_vote.1,
+            poses,
+        })),
     }
-    // Every candidate whose height agrees is a pair (the nearest in height is not always the tip: a wrist or
-    // forearm part may sit at a similar height); the levelled RANSAC below sorts them out.
+}
+
+/// The rough solve under `up`: every candidate whose height agrees with `offset` is a pair (the nearest in height
+/// is not always the tip: a wrist or forearm part may sit at a similar height); the levelled RANSAC sorts them out.
+fn solve_under(
+    u: &Under<'_>,
+    candidates: &[Candidate],
+    pairs: &mut [Pair],
+    residuals: &mut [f32],
+    inliers: &mut [bool],
+) -> Result<Solution, StartError> {
+    let Under {
+        up,
+        arms,
+        robot_z,
+        offset,
+        options,
+    } = *u;
+    let poses = robot_z.len();
     let mut pose_of = [0u8; MAX_POSES * CANDIDATES_PER_POSE];
     let mut np = 0usize;
-    for c in &b.candidates[..nc] {
-        if np < b.pairs.len()
+    for c in candidates {
+        if np < pairs.len()
             && np < pose_of.len()
             && libm::fabsf(robot_z[c.pose] - c.tip_height_m - offset) <= options.vote_tolerance_m
         {
-            b.pairs[np] = Pair {
+            pairs[np] = Pair {
                 robot_base: arms[c.pose].tip_robot_base,
                 camera: c.tip_camera,
             };
@@ -619,16 +668,25 @@ pub fn rough_extrinsic<'f, const N: usize>(
             np += 1;
         }
     }
-    let s = level_solve(
-        &b.pairs[..np],
+    level_solve(
+        &pairs[..np],
         &pose_of[..np],
         poses,
-        &up,
+        up,
         &rough_solve_options(),
-        b.residuals,
-        b.inliers,
-    )?;
-    Ok((s, found))
+        residuals,
+        inliers,
+    )
+}
+
+/// What the rough solve under one plane needs besides the buffers.
+#[derive(Clone, Copy)]
+struct Under<'a> {
+    up: &'a Plane,
+    arms: &'a [ArmSample],
+    robot_z: &'a [f32],
+    offset: f32,
+    options: &'a StartOptions,
 }
 
 /// The rough solve with up known on both sides: the camera is first turned so that the plane's up is the base's
@@ -786,6 +844,7 @@ fn cq_camera(level: &UnitQuaternion, levelled: &Vector3) -> Vector3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::calib::solve::rotation_error_deg;
     use crate::time::Timestamp;
 
     const W: u16 = 160;
@@ -920,5 +979,72 @@ mod tests {
             choose_tips(&candidates[..nc], &[0.0, 5.0, 9.0], 0.03, &mut chosen).0,
             1
         );
+    }
+
+    #[test]
+    fn the_solve_under_a_tilted_plane_fits_fewer_poses() {
+        // Camera 2 m above the floor looking straight down (camera z = -base z); the floor is up's plane.
+        let truth = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, 2.0),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI),
+        );
+        let tips: [Point3; 8] = core::array::from_fn(|i| {
+            let f = i as f32;
+            Point3::new(
+                0.3 * libm::cosf(1.7 * f),
+                0.3 * libm::sinf(1.7 * f),
+                0.3 + 0.05 * f,
+            )
+        });
+        let arms: [ArmSample; 8] = core::array::from_fn(|i| ArmSample {
+            time: Timestamp::from_us(i as u64 * 1000).unwrap(),
+            tip_robot_base: tips[i],
+            robot_base_from_probe: UnitQuaternion::identity(),
+        });
+        let robot_z = tips.map(|t| t.z);
+        let floor = up_plane();
+        // A head section tilted 15° about the camera's x axis, through the same point.
+        let tilted = Plane::through(
+            Vector3::new(0.0, 0.0, 2.0),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 15f32.to_radians())
+                * Vector3::new(0.0, 0.0, -1.0),
+        );
+        let opts = StartOptions::default();
+        let blank = Pair {
+            robot_base: Point3::origin(),
+            camera: Point3::origin(),
+        };
+        let mut solved = [0usize; 2];
+        for (slot, up) in [floor, tilted].iter().enumerate() {
+            let candidates: [Candidate; 8] = core::array::from_fn(|i| {
+                let c = truth.inverse() * tips[i];
+                Candidate {
+                    pose: i,
+                    tip_camera: c,
+                    tip_height_m: up.signed_distance(&c),
+                }
+            });
+            let mut chosen = [None; 8];
+            let (found, offset) = choose_tips(&candidates, &robot_z, opts.vote_tolerance_m, &mut chosen);
+            let under = Under {
+                up,
+                arms: &arms,
+                robot_z: &robot_z,
+                offset,
+                options: &opts,
+            };
+            let (mut pairs, mut res, mut inl) = ([blank; 8], [0.0f32; 8], [false; 8]);
+            solved[slot] = match solve_under(&under, &candidates, &mut pairs, &mut res, &mut inl) {
+                Ok(s) if found >= 4 => {
+                    if slot == 0 {
+                        assert!(rotation_error_deg(&s.robot_base_from_camera, &truth) < 0.01);
+                    }
+                    s.inliers
+                }
+                _ => 0,
+            };
+        }
+        assert_eq!(solved[0], 8, "under the floor every pose fits");
+        assert!(solved[1] < 8, "under the tilted plane {} poses fit", solved[1]);
     }
 }
