@@ -792,23 +792,14 @@ impl<'m, 's> Tracker<'m, 's> {
                 }
             }
         }
-        let Some((body_from_torso, raw)) = self.build_torso(&z) else {
+        let Some(torso) = self.shaped_torso(*bed, z) else {
             // The scratch lengths were checked when the tracker was built.
             return;
         };
-        let torso_from_body = body_from_torso.inverse();
-        let salient_torso = body
-            .salient_points(&raw)
-            .map(|p| torso_from_body * Point3::from(p));
         self.pose = camera_from_body
-            .map(|c| c * body_from_torso)
+            .map(|c| c * torso.body_from_torso)
             .or_else(|| observed.and_then(torso::a_from_torso));
-        self.torso = Some(TorsoModel {
-            bed: *bed,
-            body_from_torso,
-            salient_torso,
-            shape: z,
-        });
+        self.torso = Some(torso);
         self.shape_revision = self.shape_revision.wrapping_add(1);
         self.last_shape_frame = None;
         self.init.refits_left = if observed.is_some() {
@@ -864,26 +855,33 @@ impl<'m, 's> Tracker<'m, 's> {
             return;
         };
         let n = f32::from(self.init.refit_n);
-        let z = self.init.refit_sum.map(|s| s / n);
-        let Some((body_from_torso, raw)) = self.build_torso(&z) else {
+        let Some(torso) = self.shaped_torso(t.bed, self.init.refit_sum.map(|s| s / n)) else {
             return;
         };
-        let torso_from_body = body_from_torso.inverse();
-        let salient_torso = body
-            .salient_points(&raw)
-            .map(|p| torso_from_body * Point3::from(p));
-        self.torso = Some(TorsoModel {
-            salient_torso,
-            body_from_torso,
-            shape: z,
-            ..*t
-        });
-        self.pose = Some(camera_from_body * body_from_torso);
+        self.pose = Some(camera_from_body * torso.body_from_torso);
+        self.torso = Some(torso);
         self.last_good_pose = self.pose;
         // The support a right fit reaches depends on the shape: measure it afresh.
         self.support_ref = None;
         self.shape_revision = self.shape_revision.wrapping_add(1);
         self.last_shape_frame = None;
+    }
+
+    /// The torso model on `bed` shaped with `z` (σ units), built into the scratch buffers, with its salient points.
+    fn shaped_torso(&mut self, bed: BedScene, z: [f32; SHAPE_COMPONENTS]) -> Option<TorsoModel> {
+        let (body_from_torso, raw) = self.build_torso(&z)?;
+        let torso_from_body = body_from_torso.inverse();
+        let salient_torso = self
+            .models
+            .body
+            .salient_points(&raw)
+            .map(|p| torso_from_body * Point3::from(p));
+        Some(TorsoModel {
+            bed,
+            body_from_torso,
+            salient_torso,
+            shape: z,
+        })
     }
 
     /// Shape the torso model with `z` (σ units) into the scratch buffers; its `body_from_torso` and the raw
