@@ -171,14 +171,15 @@ fn main() -> Result<()> {
                 camera: r.0
             })
         );
+        // Detected tips paired with the arm's: what the tool solves from.
+        let pairs: Vec<Pair> = rows[..m]
+            .iter()
+            .map(|r| Pair {
+                robot_base: r.2,
+                camera: r.0,
+            })
+            .collect();
         {
-            let pairs: Vec<Pair> = rows[..m]
-                .iter()
-                .map(|r| Pair {
-                    robot_base: r.2,
-                    camera: r.0,
-                })
-                .collect();
             let (mut res, mut inl) = (vec![0.0; m], vec![false; m]);
             if let Ok(s) = solve(&pairs, &SolveOptions::default(), &mut res, &mut inl) {
                 summary.push((
@@ -210,13 +211,6 @@ fn main() -> Result<()> {
         );
         // Anisotropic: the axial direction (probe axis in robot_base, from the truth here) weighted by w.
         for w in [1.0f32, 0.3, 0.1, 0.03] {
-            let pairs: Vec<Pair> = rows[..m]
-                .iter()
-                .map(|r| Pair {
-                    robot_base: r.2,
-                    camera: r.0,
-                })
-                .collect();
             let (mut res, mut inl) = (vec![0.0; m], vec![false; m]);
             let Ok(s0) = solve(&pairs, &SolveOptions::default(), &mut res, &mut inl) else {
                 continue;
