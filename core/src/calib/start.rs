@@ -584,7 +584,7 @@ pub fn rough_extrinsic<'f, const N: usize>(
     // tips is solved under, and the solve with the most poses within the threshold (then the smaller RMS) wins.
     // Without any, the plane with the most agreeing tips gives the error.
     let mut best_vote = (0usize, 0usize);
-    let mut best: Option<(usize, Solution, usize)> = None;
+    let mut best: Option<(Solution, usize)> = None;
     let mut last_err: Option<StartError> = None;
     for (p, plane) in planes[..n_planes].iter().enumerate() {
         let nc = candidates_under(plane, b.candidates, scratch);
@@ -609,11 +609,11 @@ pub fn rough_extrinsic<'f, const N: usize>(
         };
         match solve_under(&under, &b.candidates[..nc], b.pairs, b.residuals, b.inliers) {
             Ok(sol) => {
-                if best.as_ref().is_none_or(|(_, bs, _)| {
+                if best.as_ref().is_none_or(|(bs, _)| {
                     sol.inliers > bs.inliers
                         || (sol.inliers == bs.inliers && sol.rms_residual_m < bs.rms_residual_m)
                 }) {
-                    best = Some((p, sol, found));
+                    best = Some((sol, found));
                 }
             }
             Err(e) => {
@@ -623,17 +623,13 @@ pub fn rough_extrinsic<'f, const N: usize>(
             }
         }
     }
-    match best {
-        Some((_, s, found)) => Ok((s, found)),
-        None if best_vote.1 < 4 => Err(StartError::TooFewTips {
+    // Without a plane of four agreeing poses nothing was solved, so there is no solve error either.
+    best.ok_or_else(|| {
+        last_err.unwrap_or(StartError::TooFewTips {
             found: best_vote.1,
             poses,
-        }),
-        None => Err(last_err.unwrap_or(StartError::TooFewTips {
-            found: best_vote.1,
-            poses,
-        })),
-    }
+        })
+    })
 }
 
 /// The rough solve under `up`: every candidate whose height agrees with `offset` is a pair (the nearest in height
