@@ -298,7 +298,8 @@ struct Init {
     shape_n: u16,
     /// Lock refits still to run (set when the init phase estimated the shape).
     refits_left: u8,
-    /// Sum of the lock refits' shapes so far, how many, and the last refit's `camera_from_body`.
+    /// Sum of the lock refits' shapes so far, how many, and the last refit's `camera_from_body` (`None` until one
+    /// succeeds).
     refit_sum: [f32; SHAPE_COMPONENTS],
     refit_n: u8,
     refit_pose: Option<Isometry3>,
@@ -848,10 +849,8 @@ impl<'m, 's> Tracker<'m, 's> {
             self.init.refit_n += 1;
             self.init.refit_pose = Some(r.camera_from_model);
         }
-        if self.init.refits_left > 0 || self.init.refit_n == 0 {
-            return;
-        }
-        let Some(camera_from_body) = self.init.refit_pose else {
+        // No refit succeeded: the init phase's shape stays.
+        let (0, Some(camera_from_body)) = (self.init.refits_left, self.init.refit_pose) else {
             return;
         };
         let n = f32::from(self.init.refit_n);
