@@ -24,6 +24,9 @@ pub struct IcpParams {
     pub occluder_margin_m: f32,
     /// The mattress plane in the camera frame (normal up); observed points below `above_mattress_m` are bed.
     pub mattress: Plane,
+    /// The bed's raised head section in the camera frame (normal up), when there is one: observed points must lie
+    /// `above_mattress_m` above it too, or the raised mattress beside the torso pairs with the model's edges.
+    pub head_section: Option<Plane>,
     /// Height above the mattress below which observed points are not body (metres).
     pub above_mattress_m: f32,
     /// Pixel distance of the neighbours that give an observed normal.
@@ -40,10 +43,20 @@ impl IcpParams {
             max_distance_m: 0.1,
             occluder_margin_m: 0.04,
             mattress,
+            head_section: None,
             above_mattress_m: 0.015,
             normal_step_px: 2,
             behind_margin_m: f32::INFINITY,
         }
+    }
+
+    /// Whether an observed point (camera frame) is bed: less than `above_mattress_m` above the mattress or the
+    /// raised head section (the bed's surface is the higher of the two planes).
+    pub fn is_bed(&self, o: &Point3) -> bool {
+        self.mattress.signed_distance(o) < self.above_mattress_m
+            || self
+                .head_section
+                .is_some_and(|h| h.signed_distance(o) < self.above_mattress_m)
     }
 }
 
@@ -166,7 +179,7 @@ fn partner_of(
     v: i32,
     params: &IcpParams,
 ) -> Result<Option<(Point3, Vector3)>, ()> {
-    if params.mattress.signed_distance(&o) < params.above_mattress_m
+    if params.is_bed(&o)
         || (o - p_cam).norm() > params.max_distance_m
         || o.z > p_cam.z + params.behind_margin_m
     {
@@ -317,4 +330,28 @@ pub fn robust_point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3
         UnitQuaternion::new(Vector3::new(b[0], b[1], b[2])),
     );
     Ok((delta * camera_from_model, assoc))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_raised_head_section_is_bed_like_the_mattress() {
+        // Bed frame as camera frame for the test: mattress z = 0 (normal up), head section raised 30° about the
+        // hinge line x at y = 0, toward +y.
+        let mut params = IcpParams::new(Plane::through(Vector3::zeros(), Vector3::z()));
+        let (s, c) = (libm::sinf(30f32.to_radians()), libm::cosf(30f32.to_radians()));
+        let on_section = Point3::new(0.1, 0.5 * c, 0.5 * s + 0.005);
+        let on_body = Point3::new(0.1, 0.5 * c, 0.5 * s + 0.1);
+        let on_flat = Point3::new(0.1, -0.5, 0.005);
+        // Without the section, its surface is 25 cm above the mattress: body.
+        assert!(!params.is_bed(&on_section));
+        params.head_section = Some(Plane::through(Vector3::zeros(), Vector3::new(0.0, -s, c)));
+        assert!(params.is_bed(&on_section));
+        assert!(!params.is_bed(&on_body));
+        // The flat part stays bed, and a body lying on it stays body (the extended section plane is far below).
+        assert!(params.is_bed(&on_flat));
+        assert!(!params.is_bed(&Point3::new(0.1, -0.5, 0.1)));
+    }
 }

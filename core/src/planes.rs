@@ -164,6 +164,12 @@ const MAX_PLANES: usize = 5;
 const HORIZONTAL_DEG: f32 = 10.0;
 /// Height band above the mattress in which a raised head section meets it (its hinge), metres.
 const HINGE_BAND_M: f32 = 0.03;
+/// A raised head section has at least this many sampled points within [`HINGE_BAND_M`] of the mattress, and at
+/// least one in this many of its points there: the patient's hips hide most of the hinge, leaving the bed's edges
+/// beside them (0.9-2.6 % of the section's points on validation views); a flat, tilted body surface has none.
+const HINGE_MIN_POINTS: u32 = 8;
+/// See [`HINGE_MIN_POINTS`].
+const HINGE_SHARE_INV: u32 = 200;
 /// A head section's normal lies within this angle of the plane of up and the bed's long axis, degrees.
 const HINGE_AXIS_DEG: f32 = 8.0;
 /// The steepest head section looked for, degrees from horizontal.
@@ -323,7 +329,7 @@ pub fn estimate_bed(
                     below += (h < -HINGE_BAND_M) as u32;
                 }
             }
-            n > 0 && at_hinge * 50 >= n && below * 20 < n
+            n > 0 && at_hinge >= HINGE_MIN_POINTS && at_hinge * HINGE_SHARE_INV >= n && below * 20 < n
         })
         .max_by_key(|(_, m)| *m)
         .map(|(p, _)| *p);

@@ -776,8 +776,7 @@ impl<'m, 's> Tracker<'m, 's> {
                         m += 1;
                     }
                 }
-                let params =
-                    FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed.mattress), &coeffs[..m]);
+                let params = FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed), &coeffs[..m]);
                 if let Ok(r) = fit::fit_shape(
                     &body,
                     frame,
@@ -832,7 +831,7 @@ impl<'m, 's> Tracker<'m, 's> {
         // fitting (no pull toward the init estimate, only λ's toward the mean body): on the validation sequences
         // the init estimate is close to the mean and carries little, and holding the non-torso coefficients at it
         // left torso errors 1.4x as large (docs/tracking.md, "Shape refit on lock").
-        let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, t.bed.mattress));
+        let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed));
         if let Ok(r) = fit::fit_shape(
             &body,
             frame,
@@ -919,7 +918,7 @@ impl<'m, 's> Tracker<'m, 's> {
     ) -> Option<Isometry3> {
         let (body_from_torso, _) = self.build_torso(z)?;
         let forest = forest_start * body_from_torso;
-        let params = torso_icp::icp_params(&self.cfg.icp, bed.mattress);
+        let params = torso_icp::icp_params(&self.cfg.icp, bed);
         let mut starts = self.screen_bed_starts(frame, &forest, bed, &params, clock, watch);
         let _ = starts.push(forest);
         let mut best: Option<(f32, Isometry3)> = None;
@@ -1002,8 +1001,8 @@ impl<'m, 's> Tracker<'m, 's> {
                     }
                 }
             }
-            let acquire_params = torso_icp::icp_params(&self.cfg.icp, t.bed.mattress);
-            let temporal_params = torso_icp::temporal_params(&self.cfg.icp, t.bed.mattress);
+            let acquire_params = torso_icp::icp_params(&self.cfg.icp, &t.bed);
+            let temporal_params = torso_icp::temporal_params(&self.cfg.icp, &t.bed);
             let icp_cfg = self.cfg.icp;
             if prior_pose.is_none()
                 && variant == Variant::ForestIcpFeedback

@@ -8,6 +8,7 @@ use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::geometry::{Isometry3, Point3, Vector3};
 use crate::icp::{self, Association, IcpParams};
+use crate::planes::BedScene;
 use crate::time::Clock;
 use crate::tracker::budget::{BudgetConfig, Stopwatch, iteration_fits};
 use crate::tracker::state::FitQuality;
@@ -132,23 +133,25 @@ impl TorsoFit {
     }
 }
 
-/// The association parameters of the fit for a mattress plane, keeping every pair behind the model (acquisition
-/// starts and the shape fit); the temporal start adds `behind_margin_m` ([`temporal_params`]).
-pub fn icp_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> IcpParams {
+/// The association parameters of the fit for a bed (its mattress and raised head section are not body), keeping
+/// every pair behind the model (acquisition starts and the shape fit); the temporal start adds `behind_margin_m`
+/// ([`temporal_params`]).
+pub fn icp_params(cfg: &TorsoIcpConfig, bed: &BedScene) -> IcpParams {
     IcpParams {
         max_distance_m: cfg.max_distance_m,
         occluder_margin_m: cfg.occluder_margin_m,
-        ..IcpParams::new(mattress)
+        head_section: bed.head_section,
+        ..IcpParams::new(bed.mattress)
     }
 }
 
 /// [`icp_params`] for the fit from the temporal start: pairs whose observed surface lies well behind the model are
 /// dropped, so the model's edges do not slide onto the patient's arms or the bed (which turned the torso by 10-15°
 /// within a few frames); a start several centimetres off (acquisition) needs those pairs to be pulled in.
-pub fn temporal_params(cfg: &TorsoIcpConfig, mattress: crate::geometry::Plane) -> IcpParams {
+pub fn temporal_params(cfg: &TorsoIcpConfig, bed: &BedScene) -> IcpParams {
     IcpParams {
         behind_margin_m: cfg.behind_margin_m,
-        ..icp_params(cfg, mattress)
+        ..icp_params(cfg, bed)
     }
 }
 

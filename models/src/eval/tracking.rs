@@ -344,6 +344,11 @@ pub fn run_variant(
         // The init phase's shape (σ units) beside the truth: the largest term of the torso error.
         "shape_estimate": tracker.shape().map(|z| z.to_vec()),
         "shape_true": &seq.meta.shape,
+        // The raised head section the init phase found (degrees from the mattress; null when none): acquisition
+        // depends on it where the bed is raised.
+        "head_section_deg": tracker.bed().and_then(|b| b
+            .head_section
+            .map(|h| h.normal().angle(&b.mattress.normal()).to_degrees())),
     });
     Ok((scores, summary))
 }
