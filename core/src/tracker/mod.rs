@@ -1041,7 +1041,7 @@ impl<'m, 's> Tracker<'m, 's> {
                     (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
                     _ => icp_cfg.min_support,
                 };
-                let mut q = fit.quality(&icp_cfg, min_support);
+                let mut q = fit.quality(&icp_cfg, min_support, prior_pose.is_none());
                 if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
                     q = FitQuality::Failed;

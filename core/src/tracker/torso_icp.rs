@@ -50,6 +50,12 @@ pub struct TorsoIcpConfig {
     pub acquire_min_iterations: u8,
     /// Below this share of the front-facing torso points visible (the rest occluded), the torso is occluded.
     pub min_visible: f32,
+    /// [`TorsoIcpConfig::min_pairs`] for a fit made without a pose (acquisition, re-acquisition): lower, because a
+    /// patient's own arms over the chest and the robot arm together can hide 60-80 % of the torso for seconds, and
+    /// a wrong acquisition is still caught by the support, the bed test and the confirmation over frames.
+    pub acquire_min_pairs: u16,
+    /// [`TorsoIcpConfig::min_visible`] for a fit made without a pose (see [`TorsoIcpConfig::acquire_min_pairs`]).
+    pub acquire_min_visible: f32,
     /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
     pub occluded_below: f32,
     /// An occluder is an observed point this much nearer to the camera than the model surface, metres.
@@ -77,6 +83,8 @@ impl Default for TorsoIcpConfig {
             confirm_rad: 0.1,
             acquire_min_iterations: 5,
             min_visible: 0.3,
+            acquire_min_pairs: 100,
+            acquire_min_visible: 0.15,
             occluded_below: 0.7,
             occluder_margin_m: 0.04,
             max_distance_m: 0.1,
@@ -112,13 +120,19 @@ impl TorsoFit {
     }
 
     /// The verdict for the state machine; `min_support` is `cfg.min_support` or, while tracking, what the
-    /// reference support asks.
-    pub fn quality(&self, cfg: &TorsoIcpConfig, min_support: f32) -> FitQuality {
+    /// reference support asks; `acquiring` (a fit made without a pose) takes the acquisition's pair and visibility
+    /// floors.
+    pub fn quality(&self, cfg: &TorsoIcpConfig, min_support: f32, acquiring: bool) -> FitQuality {
         let a = &self.association;
-        if a.pairs >= cfg.min_pairs as usize
+        let (min_pairs, min_visible) = if acquiring {
+            (cfg.acquire_min_pairs, cfg.acquire_min_visible)
+        } else {
+            (cfg.min_pairs, cfg.min_visible)
+        };
+        if a.pairs >= min_pairs as usize
             && a.rms_m() <= cfg.max_rms_m
             && self.support() >= min_support
-            && self.visible >= cfg.min_visible
+            && self.visible >= min_visible
         {
             FitQuality::Good
         } else if self.visible < cfg.occluded_below
@@ -252,22 +266,40 @@ mod tests {
     fn a_right_fit_is_good_and_a_fit_seen_through_is_not() {
         let cfg = TorsoIcpConfig::default();
         assert_eq!(
-            fit(600, 570, 100, 30, 0).quality(&cfg, cfg.min_support),
+            fit(600, 570, 100, 30, 0).quality(&cfg, cfg.min_support, false),
             FitQuality::Good
         );
         // Same residual, but the camera sees the mattress through half of the model: a wrong local minimum.
         assert_eq!(
-            fit(600, 570, 100, 600, 0).quality(&cfg, cfg.min_support),
+            fit(600, 570, 100, 600, 0).quality(&cfg, cfg.min_support, false),
             FitQuality::Failed
         );
         // A third seen through passes the floor, but not while tracking a patient whose right fit had 0.9.
         let third = fit(600, 570, 100, 300, 0);
-        assert_eq!(third.quality(&cfg, cfg.min_support), FitQuality::Good);
-        assert_eq!(third.quality(&cfg, 0.9 - cfg.support_drop), FitQuality::Failed);
+        assert_eq!(third.quality(&cfg, cfg.min_support, false), FitQuality::Good);
+        assert_eq!(
+            third.quality(&cfg, 0.9 - cfg.support_drop, false),
+            FitQuality::Failed
+        );
         // Many pairs outside the inlier band.
         assert_eq!(
-            fit(600, 300, 100, 0, 0).quality(&cfg, cfg.min_support),
+            fit(600, 300, 100, 0, 0).quality(&cfg, cfg.min_support, false),
             FitQuality::Failed
+        );
+    }
+
+    #[test]
+    fn acquisition_takes_a_small_clean_fit_that_tracking_would_not() {
+        let cfg = TorsoIcpConfig::default();
+        // The patient's arms over the chest and the robot arm hide 78 % of the torso: 120 clean pairs.
+        let f = fit(120, 118, 430, 2, 0);
+        assert!(f.visible < cfg.min_visible && f.visible >= cfg.acquire_min_visible);
+        assert_eq!(f.quality(&cfg, cfg.min_support, true), FitQuality::Good);
+        assert_eq!(f.quality(&cfg, cfg.min_support, false), FitQuality::Occluded);
+        // Below the acquisition's own floors it is not good either.
+        assert_ne!(
+            fit(80, 80, 430, 0, 0).quality(&cfg, cfg.min_support, true),
+            FitQuality::Good
         );
     }
 
@@ -277,10 +309,10 @@ mod tests {
         // 50 pairs seen; the arm's shadow leaves 700 model points on pixels without depth.
         let f = fit(50, 50, 0, 0, 700);
         assert!(f.visible < cfg.min_visible);
-        assert_eq!(f.quality(&cfg, cfg.min_support), FitQuality::Occluded);
+        assert_eq!(f.quality(&cfg, cfg.min_support, false), FitQuality::Occluded);
         // With the same few pairs and nothing hidden, the patient is simply not there.
         assert_eq!(
-            fit(50, 50, 0, 0, 0).quality(&cfg, cfg.min_support),
+            fit(50, 50, 0, 0, 0).quality(&cfg, cfg.min_support, false),
             FitQuality::Failed
         );
     }
