@@ -226,7 +226,7 @@ fn icp_converges_back_from_a_known_perturbation() {
     let surface = tracker.surface().unwrap();
     let bed = tracker.bed().unwrap();
     let icp = TorsoIcpConfig::default();
-    let params = torso_icp::icp_params(&icp, &bed);
+    let params = torso_icp::icp_params(&icp, bed);
     let budget = tracker.config().budget;
     let (again, _) = torso_icp::fit_torso(
         &f,
