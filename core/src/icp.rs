@@ -2,10 +2,11 @@
 //! linearised 6-DoF Gauss-Newton step per call (paper §3.4; the shape fit and the tracker both use it).
 //!
 //! Association: a model point (camera frame) is projected into the depth image; the observed point at that pixel
-//! is its partner when it lies above the mattress margin, within `max_distance_m` (the paper's 0.1 m), and not in
-//! front of the model point by more than `occluder_margin_m`: points in front of the model surface belong to
-//! whatever occludes the body (the robot arm, a raised hand) and are counted, not fitted. The observed normal
-//! comes from the depth neighbours `normal_step_px` away.
+//! is its partner when it lies above the mattress margin (and above the raised head section's, when the bed has
+//! one), within `max_distance_m` (the paper's 0.1 m), and not in front of the model point by more than
+//! `occluder_margin_m`: points in front of the model surface belong to whatever occludes the body (the robot arm, a
+//! raised hand) and are counted, not fitted. The observed normal comes from the depth neighbours `normal_step_px`
+//! away.
 //!
 //! Cost: per model point one projection, three unprojections and a 6x6 outer product (~80 flops): 1.2 k torso
 //! points take about 20 µs per step on one desktop core; nothing allocates.

@@ -4,16 +4,20 @@
 //! mattress inside the bed's footprint (the patient and, where present, the robot arm), not bed or floor.
 //!
 //! The init phase requires the patient on the bed and no other object in view. The mattress is the plane with the
-//! patient on it: when the floor is visible too it is the parallel plane nearer the camera; when one plane is found
-//! alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the points
-//! lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not give.
-//! A raised head section is the largest plane tilted from up that rises above the mattress; the clip keeps only
-//! what lies above it as well. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without
-//! either, the largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
+//! patient on it: when the floor is visible too it is the parallel plane nearer the camera with more lying on it (a
+//! plane of the robot arm's links a bed's height above a mattress is not a mattress over a floor); when one plane is
+//! found alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the
+//! points lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not
+//! give. A raised head section is the largest plane tilted from up that rises from the mattress at a hinge and ends
+//! below the volume's top; the clip keeps only what lies above it as well. Up is the caller's (from
+//! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
+//! steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once).
-//! The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller lends the scratch.
+//! Telling floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a
+//! million comparisons). The clip is one rigid transform and six comparisons per point. Nothing allocates: the
+//! caller lends the scratch.
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
