@@ -41,6 +41,11 @@ pub struct SolveOptions {
     /// ([`solve_with_axes`]; 1: isotropic). The detector places the tip across the axis to a fraction of a
     /// millimetre but along it only to 1-3 mm; the arm's error is the same both ways.
     pub axial_weight: f32,
+    /// The second cut after the refinement: pairs with a residual above this many times the median inlier
+    /// residual (and above [`SolveOptions::trim_floor_m`]) are dropped and the refinement runs again (0: off).
+    pub trim_factor: f32,
+    /// The second cut never goes below this, metres.
+    pub trim_floor_m: f32,
 }
 
 impl Default for SolveOptions {
@@ -57,6 +62,8 @@ impl Default for SolveOptions {
             refine_iterations: 5,
             max_rms_residual_m: 0.005,
             axial_weight: 0.25,
+            trim_factor: 3.5,
+            trim_floor_m: 0.004,
         }
     }
 }
@@ -379,40 +386,36 @@ pub fn solve_with_axes(
         });
     }
 
-    // Refinement: Kabsch over the inliers with Huber weights (full weight within half the threshold), then the
-    // inlier set again, a few rounds; a round that would lose the consensus is not taken.
     let huber = 0.5 * thr;
-    for _ in 0..options.refine_iterations {
-        let weight = |i: usize| {
-            let r = residual(&t, &pairs[i]);
-            if r >= thr {
-                0.0
-            } else if r <= huber {
-                1.0
-            } else {
-                huber / r
+    refine(pairs, axes, options, thr, huber, &mut t, &mut count);
+    // A second, tighter cut: poses far beyond the others' residuals (a wrist frame or a depth error that the
+    // 10 mm RANSAC threshold lets through) are dropped and the refinement runs again, as long as enough remain.
+    let trim = options.trim_factor;
+    let mut thr = thr;
+    if trim.is_finite() && trim > 0.0 {
+        let mut sorted = [0.0f32; TRIM_MAX_PAIRS];
+        let mut m = 0usize;
+        for p in pairs.iter().take(TRIM_MAX_PAIRS) {
+            let r = residual(&t, p);
+            if r < thr {
+                sorted[m] = r;
+                m += 1;
             }
-        };
-        let Some(next) = kabsch(pairs, weight) else { break };
-        let (c, _) = score(&next);
-        if c < count {
-            break;
         }
-        t = next;
-        count = c;
-    }
-    let w = options.axial_weight;
-    if w.is_finite() && w > 0.0 && w < 1.0 && axes.iter().any(|a| a.norm_squared() > 0.5) {
-        for _ in 0..ANISOTROPIC_ROUNDS {
-            let Some(next) = anisotropic_step(pairs, axes, &t, thr, huber, w) else {
-                break;
-            };
-            let (c, _) = score(&next);
-            if c < count {
-                break;
+        if m >= needed {
+            let (_, med, _) = sorted[..m].select_nth_unstable_by(m / 2, f32::total_cmp);
+            let cut = (trim * *med).max(options.trim_floor_m);
+            let kept = pairs.iter().filter(|p| residual(&t, p) < cut).count();
+            if cut < thr && kept >= needed && kept < count {
+                let mut t2 = t;
+                let mut c2 = kept;
+                let score2 = |t: &Isometry3| pairs.iter().filter(|p| residual(t, p) < cut).count();
+                refine_with(pairs, axes, options, cut, 0.5 * cut, &mut t2, &mut c2, &score2);
+                if score2(&t2) >= needed {
+                    t = t2;
+                    thr = cut;
+                }
             }
-            t = next;
-            count = c;
         }
     }
     let (mut sq, mut max, mut k) = (0.0f32, 0.0f32, 0usize);
@@ -451,6 +454,72 @@ pub fn solve_with_axes(
         max_residual_m: max,
         condition,
     })
+}
+
+/// Most pairs the second cut looks at (more are solved without it).
+const TRIM_MAX_PAIRS: usize = 128;
+
+/// The refinement after RANSAC with the plain inlier count under `thr` as the score.
+fn refine(
+    pairs: &[Pair],
+    axes: &[Vector3],
+    options: &SolveOptions,
+    thr: f32,
+    huber: f32,
+    t: &mut Isometry3,
+    count: &mut usize,
+) {
+    let score = |t: &Isometry3| pairs.iter().filter(|p| residual(t, p) < thr).count();
+    refine_with(pairs, axes, options, thr, huber, t, count, &score);
+}
+
+/// Kabsch over the pairs within `thr` with Huber weights (full weight within `huber`), a few rounds, then the
+/// axis-weighted Gauss-Newton rounds; a round that would lose pairs under `score` is not taken.
+#[allow(clippy::too_many_arguments)]
+fn refine_with(
+    pairs: &[Pair],
+    axes: &[Vector3],
+    options: &SolveOptions,
+    thr: f32,
+    huber: f32,
+    t: &mut Isometry3,
+    count: &mut usize,
+    score: &dyn Fn(&Isometry3) -> usize,
+) {
+    for _ in 0..options.refine_iterations {
+        let cur = *t;
+        let weight = |i: usize| {
+            let r = residual(&cur, &pairs[i]);
+            if r >= thr {
+                0.0
+            } else if r <= huber {
+                1.0
+            } else {
+                huber / r
+            }
+        };
+        let Some(next) = kabsch(pairs, weight) else { break };
+        let c = score(&next);
+        if c < *count {
+            break;
+        }
+        *t = next;
+        *count = c;
+    }
+    let w = options.axial_weight;
+    if w.is_finite() && w > 0.0 && w < 1.0 && axes.iter().any(|a| a.norm_squared() > 0.5) {
+        for _ in 0..ANISOTROPIC_ROUNDS {
+            let Some(next) = anisotropic_step(pairs, axes, t, thr, huber, w) else {
+                break;
+            };
+            let c = score(&next);
+            if c < *count {
+                break;
+            }
+            *t = next;
+            *count = c;
+        }
+    }
 }
 
 /// Gauss-Newton rounds of the axis-weighted refinement.
@@ -649,6 +718,31 @@ mod tests {
             .unwrap(),
             plain
         );
+    }
+
+    #[test]
+    fn a_pose_far_beyond_the_others_residuals_is_cut() {
+        let t = truth();
+        let pts = poses(12);
+        let mut pairs = pairs_for(&pts[..12], &t);
+        let mut rng = SplitMix(23);
+        for p in pairs.iter_mut().take(12) {
+            let f = |rng: &mut SplitMix| (rng.below(2001) as f32 - 1000.0) * 8e-7;
+            p.camera += Vector3::new(f(&mut rng), f(&mut rng), f(&mut rng));
+        }
+        // One pose 7 mm off: within the 10 mm RANSAC threshold, far beyond the others' ~0.8 mm.
+        pairs[4].camera += Vector3::new(0.0, 0.005, 0.005);
+        let (mut r, mut ok) = ([0.0; 12], [false; 12]);
+        let cut = solve(&pairs[..12], &SolveOptions::default(), &mut r, &mut ok).unwrap();
+        assert!(!ok[4] && cut.inliers == 11, "residual {} mm", r[4] * 1000.0);
+        let off = SolveOptions {
+            trim_factor: 0.0,
+            ..SolveOptions::default()
+        };
+        let kept = solve(&pairs[..12], &off, &mut r, &mut ok).unwrap();
+        assert!(ok[4] && kept.inliers == 12);
+        let err = |s: &Solution| translation_error_m(&s.robot_base_from_camera, &t);
+        assert!(err(&cut) < 0.7 * err(&kept), "{} vs {} m", err(&cut), err(&kept));
     }
 
     #[test]
