@@ -849,6 +849,8 @@ fn level_solve(
         rms_residual_m: libm::sqrtf(sq / count as f32),
         max_residual_m: max_r,
         condition,
+        // The rough solve's pairs are centimetres off by construction; its uncertainty would say nothing useful.
+        uncertainty: None,
     })
 }
 
