@@ -25,7 +25,10 @@ const CANDS: usize = 32;
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().collect();
-    let data = PathBuf::from(args.get(1).context("usage: calib_start SEQ_DIR_OR_PARENT [POSES]")?);
+    let data = PathBuf::from(
+        args.get(1)
+            .context("usage: calib_start SEQ_DIR_OR_PARENT [POSES]")?,
+    );
     let n: usize = args.get(2).map_or(Ok(10), |s| s.parse())?;
     let k = Intrinsics::KINECT_V1;
     let opts = StartOptions::default();
@@ -60,7 +63,15 @@ fn main() -> Result<()> {
         let np = supine_core::planes::scratch_points(k.width as usize, k.height as usize, 6);
         let (mut pts, mut labels) = (vec![Point3::origin(); np], vec![0u8; np]);
         let mut planes = [Plane::through(Vector3::zeros(), Vector3::z()); 3];
-        let np = background_planes(&background, k.width, k.height, &k, &mut pts, &mut labels, &mut planes);
+        let np = background_planes(
+            &background,
+            k.width,
+            k.height,
+            &k,
+            &mut pts,
+            &mut labels,
+            &mut planes,
+        );
         // The true up in the camera.
         let up_cam = cam_from_rb.rotation * Vector3::z();
         let mut scratch: Box<StartScratch<16384>> = Box::default();

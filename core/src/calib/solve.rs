@@ -864,11 +864,14 @@ mod tests {
                 *a = Vector3::new(0.2 * normal(&mut rng, 1.0), 0.2 * normal(&mut rng, 1.0), -1.0).normalize();
                 let u = a.cross(&Vector3::x()).normalize();
                 let v = a.cross(&u);
-                let e = *a * normal(&mut rng, 0.001) + u * normal(&mut rng, 0.0005) + v * normal(&mut rng, 0.0005);
+                let e = *a * normal(&mut rng, 0.001)
+                    + u * normal(&mut rng, 0.0005)
+                    + v * normal(&mut rng, 0.0005);
                 p.robot_base += e;
             }
             let (mut r, mut ok) = ([0.0; 40], [false; 40]);
-            let s = solve_with_axes(&pairs[..n], &axes[..n], &SolveOptions::default(), &mut r, &mut ok).unwrap();
+            let s =
+                solve_with_axes(&pairs[..n], &axes[..n], &SolveOptions::default(), &mut r, &mut ok).unwrap();
             let u = s.uncertainty.unwrap();
             te2 += translation_error_m(&s.robot_base_from_camera, &t).powi(2);
             re2 += rotation_error_deg(&s.robot_base_from_camera, &t).powi(2);
@@ -884,12 +887,21 @@ mod tests {
         let (te10, re10, ts10, rs10) = scatter(10, 150);
         // The reported 1-sigma is the expected size of the error: the RMS over many solves, within a factor.
         for (emp, rep) in [(te10, ts10), (re10, rs10)] {
-            assert!(rep > 0.0 && emp / rep > 0.67 && emp / rep < 1.5, "empirical {emp} vs reported {rep}");
+            assert!(
+                rep > 0.0 && emp / rep > 0.67 && emp / rep < 1.5,
+                "empirical {emp} vs reported {rep}"
+            );
         }
         let (te40, re40, ts40, rs40) = scatter(40, 60);
         // Four times the poses: about half the uncertainty, and the scatter follows.
-        assert!(ts40 < 0.7 * ts10 && rs40 < 0.7 * rs10, "{ts40} vs {ts10} m, {rs40} vs {rs10} deg");
-        assert!(te40 < 0.8 * te10 && re40 < 0.8 * re10, "{te40} vs {te10} m, {re40} vs {re10} deg");
+        assert!(
+            ts40 < 0.7 * ts10 && rs40 < 0.7 * rs10,
+            "{ts40} vs {ts10} m, {rs40} vs {rs10} deg"
+        );
+        assert!(
+            te40 < 0.8 * te10 && re40 < 0.8 * re10,
+            "{te40} vs {te10} m, {re40} vs {re10} deg"
+        );
     }
 
     #[test]
@@ -912,7 +924,10 @@ mod tests {
         assert!(tight.tight(), "{tight:?}");
         assert!(!wide.tight(), "{wide:?}");
         // Exact pairs leave no residual: the uncertainty from the data is zero, the nominal one is not.
-        assert!(wide.rotation_sigma_deg < 1e-3 && wide.nominal_rotation_sigma_deg > 0.01, "{wide:?}");
+        assert!(
+            wide.rotation_sigma_deg < 1e-3 && wide.nominal_rotation_sigma_deg > 0.01,
+            "{wide:?}"
+        );
         assert!(tight.nominal_rotation_sigma_deg > 5.0 * wide.nominal_rotation_sigma_deg);
     }
 

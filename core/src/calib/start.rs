@@ -785,7 +785,9 @@ fn level_solve(
         for c in a + 1..n {
             // Two pairs whose height offsets differ cannot both hold under a level camera (the offset is the
             // plane's height in the base); skipping them keeps the hypotheses few with many candidates.
-            if pose_of[a] == pose_of[c] || libm::fabsf(lp.offset_of[a] - lp.offset_of[c]) > lp.offset_tolerance_m {
+            if pose_of[a] == pose_of[c]
+                || libm::fabsf(lp.offset_of[a] - lp.offset_of[c]) > lp.offset_tolerance_m
+            {
                 continue;
             }
             let Some(t) = fit(&|i| i == a || i == c) else {
@@ -1077,7 +1079,11 @@ mod tests {
         const P: usize = 6;
         let tips: [Point3; P] = core::array::from_fn(|i| {
             let f = i as f32;
-            Point3::new(0.3 * libm::cosf(1.7 * f), 0.3 * libm::sinf(1.7 * f), 0.3 + 0.07 * f)
+            Point3::new(
+                0.3 * libm::cosf(1.7 * f),
+                0.3 * libm::sinf(1.7 * f),
+                0.3 + 0.07 * f,
+            )
         });
         let arms: [ArmSample; P] = core::array::from_fn(|i| ArmSample {
             time: Timestamp::from_us(i as u64 * 1000).unwrap(),
@@ -1111,7 +1117,10 @@ mod tests {
         let mut chosen = [None; P];
         let (found, offset) = choose_tips(&candidates, &robot_z, opts.vote_tolerance_m, &mut chosen);
         assert_eq!(found, P);
-        assert!((offset + 0.3).abs() < 0.01, "the vote picks the distractors' offset: {offset}");
+        assert!(
+            (offset + 0.3).abs() < 0.01,
+            "the vote picks the distractors' offset: {offset}"
+        );
         let under = Under {
             up: &floor,
             arms: &arms,
