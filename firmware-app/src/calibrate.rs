@@ -25,6 +25,7 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use supine_core::calib::{
     ArmSample, FrameOutcome, PoseObservation, Session, SessionConfig, Solution, SolveOptions, WARN_CONDITION,
+    solve::{NOMINAL_POSE_ERROR_M, WARN_NOMINAL_ROTATION_DEG},
     unit_quaternion_wxyz,
 };
 use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -111,10 +112,27 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
         solution.max_residual_m * 1000.0,
         solution.condition
     );
+    if let Some(u) = &solution.uncertainty {
+        eprintln!(
+            "uncertainty (1 sigma, from the residuals): translation {:.2} mm, rotation {:.3} deg",
+            u.translation_sigma_m * 1000.0,
+            u.rotation_sigma_deg
+        );
+    }
     if solution.condition > WARN_CONDITION {
         eprintln!(
             "warning: the poses lie close to a plane (condition {:.1} > {WARN_CONDITION}): vary the probe height more",
             solution.condition
+        );
+    }
+    if let Some(u) = solution.uncertainty.filter(|u| u.tight()) {
+        eprintln!(
+            "warning: the poses are too close together for the camera's distance (their geometry alone gives \
+             {:.2} deg / {:.1} mm at 1 sigma for {:.1} mm per pose, warned above {WARN_NOMINAL_ROTATION_DEG} deg): \
+             spread them wider across the bed and in height, or add poses",
+            u.nominal_rotation_sigma_deg,
+            u.nominal_translation_sigma_m * 1000.0,
+            NOMINAL_POSE_ERROR_M * 1000.0,
         );
     }
     let text = extrinsic_toml(&solution, poses.len());
@@ -312,13 +330,18 @@ pub fn extrinsic_toml(s: &Solution, poses: usize) -> String {
     let t = s.robot_base_from_camera.translation.vector;
     let q = s.robot_base_from_camera.rotation.quaternion();
     format!(
-        "# written by `supine calibrate`: {} of {poses} poses, rms residual {:.2} mm, condition {:.1}\n\
+        "# written by `supine calibrate`: {} of {poses} poses, rms residual {:.2} mm, condition {:.1}{}\n\
          [robot_base_from_camera]\n\
          translation_m = [{:.6}, {:.6}, {:.6}]\n\
          rotation_quat_wxyz = [{:.8}, {:.8}, {:.8}, {:.8}]\n",
         s.inliers,
         s.rms_residual_m * 1000.0,
         s.condition,
+        s.uncertainty.map_or(String::new(), |u| format!(
+            ", 1 sigma {:.2} mm / {:.3} deg",
+            u.translation_sigma_m * 1000.0,
+            u.rotation_sigma_deg
+        )),
         t.x,
         t.y,
         t.z,
@@ -503,6 +526,7 @@ mod tests {
             rms_residual_m: 0.0012,
             max_residual_m: 0.002,
             condition: 3.0,
+            uncertainty: None,
         };
         let text = extrinsic_toml(&s, 10);
         assert!(

@@ -23,7 +23,10 @@ pub mod tip;
 
 pub use pairing::{ArmHistory, ArmSample, DwellCollector, Match, PoseObservation};
 pub use session::{FrameOutcome, Session, SessionConfig, SessionStats};
-pub use solve::{Pair, Solution, SolveError, SolveOptions, WARN_CONDITION, solve, solve_with_axes};
+pub use solve::{
+    Pair, Solution, SolveError, SolveOptions, Uncertainty, WARN_CONDITION, solve, solve_with_axes,
+    uncertainty,
+};
 pub use start::{Candidate, LowPoint, StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic};
 pub use tip::{ProbeShape, TipDetection, TipError, TipOptions, TipPrior, TipScratch, detect_tip};
 

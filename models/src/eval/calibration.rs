@@ -187,6 +187,14 @@ pub struct Outcome {
     pub torso_mapping_error_mm: Option<f32>,
     /// Condition number of the pose set.
     pub condition: Option<f32>,
+    /// The solver's 1-sigma translation uncertainty, mm (expected size of `translation_error_mm`).
+    pub translation_sigma_mm: Option<f32>,
+    /// The solver's 1-sigma rotation uncertainty, degrees.
+    pub rotation_sigma_deg: Option<f32>,
+    /// The rotation uncertainty the pose set's geometry gives for the nominal per-pose error, degrees.
+    pub nominal_rotation_sigma_deg: Option<f32>,
+    /// Whether `supine calibrate` warns that the pose set is tight (see `Uncertainty::tight`).
+    pub tight_pose_set: Option<bool>,
     /// Why no extrinsic came out.
     pub refused: Option<String>,
     /// Poses of the guess-free start that gave a tip (`None`: started from the nominal guess).
@@ -260,6 +268,10 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
             residual_mm: None,
             torso_mapping_error_mm: None,
             condition: None,
+            translation_sigma_mm: None,
+            rotation_sigma_deg: None,
+            nominal_rotation_sigma_deg: None,
+            tight_pose_set: None,
             refused: None,
             start_tips: None,
             start_translation_error_mm: None,
@@ -345,6 +357,12 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
                 o.rotation_error_deg = Some(rotation_error_deg(&t, &truth));
                 o.residual_mm = Some(s.rms_residual_m * 1000.0);
                 o.condition = Some(s.condition);
+                if let Some(u) = s.uncertainty {
+                    o.translation_sigma_mm = Some(u.translation_sigma_m * 1000.0);
+                    o.rotation_sigma_deg = Some(u.rotation_sigma_deg);
+                    o.nominal_rotation_sigma_deg = Some(u.nominal_rotation_sigma_deg);
+                    o.tight_pose_set = Some(u.tight());
+                }
                 o.torso_mapping_error_mm = Some(torso_error_mm(&t, &truth, &cal.torso_points_camera));
             }
             Err(e) => o.refused = Some(e.to_string()),
@@ -475,6 +493,17 @@ fn max(v: impl Iterator<Item = f32>) -> Option<f32> {
     v.fold(None, |m: Option<f32>, x| Some(m.map_or(x, |m| m.max(x))))
 }
 
+/// Translation error at most this counts as within the target (issue 13), mm.
+pub const TARGET_TRANSLATION_MM: f32 = 5.0;
+/// Rotation error at most this counts as within the target, degrees.
+pub const TARGET_ROTATION_DEG: f32 = 0.3;
+
+/// Whether a solved outcome meets both targets.
+fn within_limits(o: &Outcome) -> bool {
+    o.translation_error_mm.is_some_and(|t| t <= TARGET_TRANSLATION_MM)
+        && o.rotation_error_deg.is_some_and(|r| r <= TARGET_ROTATION_DEG)
+}
+
 /// The report part for a set of outcomes, keyed by pose count.
 pub fn summarise(outcomes: &[&Outcome]) -> serde_json::Value {
     let mut obj = serde_json::Map::new();
@@ -496,8 +525,12 @@ pub fn summarise(outcomes: &[&Outcome]) -> serde_json::Value {
                 "start_translation_error_mm": mean(f(|o| o.start_translation_error_mm)),
                 "start_rotation_error_deg": mean(f(|o| o.start_rotation_error_deg)),
                 "rotation_error_deg_max": max(f(|o| o.rotation_error_deg)),
+                "translation_sigma_mm": mean(f(|o| o.translation_sigma_mm)),
+                "rotation_sigma_deg": mean(f(|o| o.rotation_sigma_deg)),
                 "sequences": at.len(),
                 "solved": solved.len(),
+                "within_both_limits": solved.iter().filter(|o| within_limits(o)).count(),
+                "tight_pose_sets": solved.iter().filter(|o| o.tight_pose_set == Some(true)).count(),
             }),
         );
     }
@@ -544,13 +577,14 @@ fn run_inner(args: &CalibrationEvalArgs) -> Result<()> {
         let r = &report[n.to_string()];
         let g = |k: &str| r[k].as_f64().map_or("-".to_owned(), |v| format!("{v:.2}"));
         println!(
-            "{n:>5}  {:>14}  {:>12}  {:>11}  {:>8}   solved {}/{}",
+            "{n:>5}  {:>14}  {:>12}  {:>11}  {:>8}   solved {}/{}, within both limits {}",
             g("translation_error_mm"),
             g("rotation_error_deg"),
             g("residual_mm"),
             g("torso_mapping_error_mm"),
             r["solved"],
-            r["sequences"]
+            r["sequences"],
+            r["within_both_limits"]
         );
     }
     if let Some(path) = &args.json {
