@@ -25,7 +25,9 @@ use std::time::{Duration, Instant};
 use clap::Args;
 use supine_core::calib::{
     ArmSample, FrameOutcome, PoseObservation, Session, SessionConfig, Solution, SolveOptions, WARN_CONDITION,
-    solve::{NOMINAL_POSE_ERROR_M, WARN_NOMINAL_ROTATION_DEG},
+    solve::{
+        NOMINAL_POSE_ERROR_M, WARN_NOMINAL_ROTATION_DEG, WARN_SIGMA_ROTATION_DEG, WARN_SIGMA_TRANSLATION_M,
+    },
     unit_quaternion_wxyz,
 };
 use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
@@ -133,6 +135,17 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
             u.nominal_rotation_sigma_deg,
             u.nominal_translation_sigma_m * 1000.0,
             NOMINAL_POSE_ERROR_M * 1000.0,
+        );
+    }
+    if let Some(u) = solution.uncertainty.filter(|u| u.beyond_target()) {
+        eprintln!(
+            "warning: the result's own uncertainty ({:.1} mm / {:.2} deg at 1 sigma) exceeds the {:.0} mm / {} deg \
+             probe mapping needs: the poses disagree (a wrong tip detection, arm states out of step); collect again \
+             before using it",
+            u.translation_sigma_m * 1000.0,
+            u.rotation_sigma_deg,
+            WARN_SIGMA_TRANSLATION_M * 1000.0,
+            WARN_SIGMA_ROTATION_DEG,
         );
     }
     let text = extrinsic_toml(&solution, poses.len());

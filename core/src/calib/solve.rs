@@ -118,7 +118,21 @@ impl Uncertainty {
     pub fn tight(&self) -> bool {
         self.nominal_rotation_sigma_deg > WARN_NOMINAL_ROTATION_DEG
     }
+
+    /// Whether the result's own 1-sigma exceeds the accuracy probe mapping needs ([`WARN_SIGMA_TRANSLATION_M`],
+    /// [`WARN_SIGMA_ROTATION_DEG`]): the poses disagree more than a good collection's do (a wrong detection, the
+    /// arm's state out of step), so the extrinsic should be re-collected rather than used.
+    pub fn beyond_target(&self) -> bool {
+        self.translation_sigma_m > WARN_SIGMA_TRANSLATION_M
+            || self.rotation_sigma_deg > WARN_SIGMA_ROTATION_DEG
+    }
 }
+
+/// A result whose 1-sigma translation exceeds this is flagged: the calibration target (5 mm at 10 poses).
+pub const WARN_SIGMA_TRANSLATION_M: f32 = 0.005;
+
+/// A result whose 1-sigma rotation exceeds this is flagged: the calibration target (0.3°).
+pub const WARN_SIGMA_ROTATION_DEG: f32 = 0.3;
 
 /// The per-pose error across the probe axis the tight-set check assumes (along it `1/axial_weight` times the
 /// variance), metres: on the 18 validation sequences the residuals gave 0.45-0.8 mm (median about 0.6 mm).
@@ -902,6 +916,33 @@ mod tests {
             te40 < 0.8 * te10 && re40 < 0.8 * re10,
             "{te40} vs {te10} m, {re40} vs {re10} deg"
         );
+    }
+
+    #[test]
+    fn a_result_is_flagged_when_its_own_uncertainty_exceeds_the_target() {
+        let t = truth();
+        let pts = poses(10);
+        // Ten pairs with isotropic per-pose errors of `sd` metres (seeded): 0.5 mm as a good collection has, 2.5 mm as
+        // when detections or arm states go wrong (still under the solver's 5 mm residual refusal).
+        let run = |sd: f32| {
+            let mut rng = SplitMix(7);
+            let mut pairs = pairs_for(&pts[..10], &t);
+            for p in pairs.iter_mut().take(10) {
+                p.robot_base +=
+                    Vector3::new(normal(&mut rng, sd), normal(&mut rng, sd), normal(&mut rng, sd));
+            }
+            let (mut r, mut ok) = ([0.0; 10], [false; 10]);
+            let opts = SolveOptions {
+                inlier_threshold_m: 0.05,
+                ..SolveOptions::default()
+            };
+            let s = solve(&pairs[..10], &opts, &mut r, &mut ok).unwrap();
+            assert_eq!(s.inliers, 10);
+            s.uncertainty.unwrap()
+        };
+        let (good, bad) = (run(0.0005), run(0.0025));
+        assert!(!good.beyond_target(), "{good:?}");
+        assert!(bad.beyond_target(), "{bad:?}");
     }
 
     #[test]
