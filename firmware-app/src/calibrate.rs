@@ -140,8 +140,8 @@ pub fn run(args: CalibrateArgs) -> Result<(), Failure> {
     if let Some(u) = solution.uncertainty.filter(|u| u.beyond_target()) {
         eprintln!(
             "warning: the result's own uncertainty ({:.1} mm / {:.2} deg at 1 sigma) exceeds the {:.0} mm / {} deg \
-             probe mapping needs: the poses disagree (a wrong tip detection, arm states out of step); collect again \
-             before using it",
+             probe mapping needs: collect again before using it (poses spread wider when the set is tight, else the \
+             pairs disagree: a wrong tip detection or arm states out of step)",
             u.translation_sigma_m * 1000.0,
             u.rotation_sigma_deg,
             WARN_SIGMA_TRANSLATION_M * 1000.0,

@@ -120,8 +120,8 @@ impl Uncertainty {
     }
 
     /// Whether the result's own 1-sigma exceeds the accuracy probe mapping needs ([`WARN_SIGMA_TRANSLATION_M`],
-    /// [`WARN_SIGMA_ROTATION_DEG`]): the poses disagree more than a good collection's do (a wrong detection, the
-    /// arm's state out of step), so the extrinsic should be re-collected rather than used.
+    /// [`WARN_SIGMA_ROTATION_DEG`]): a tight pose set, or pairs that disagree more than a good collection's do (a
+    /// wrong detection, the arm's state out of step); the extrinsic should be re-collected rather than used.
     pub fn beyond_target(&self) -> bool {
         self.translation_sigma_m > WARN_SIGMA_TRANSLATION_M
             || self.rotation_sigma_deg > WARN_SIGMA_ROTATION_DEG
