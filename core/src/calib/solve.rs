@@ -832,16 +832,21 @@ mod tests {
         );
     }
 
+    /// Moves each pair's camera point by a seeded uniform offset within ±`half_m` per axis.
+    fn jitter_camera(pairs: &mut [Pair], seed: u64, half_m: f32) {
+        let mut rng = SplitMix(seed);
+        for p in pairs {
+            let mut f = || (rng.below(2001) as f32 - 1000.0) * (half_m / 1000.0);
+            p.camera += Vector3::new(f(), f(), f());
+        }
+    }
+
     #[test]
     fn a_pose_far_beyond_the_others_residuals_is_cut() {
         let t = truth();
         let pts = poses(12);
         let mut pairs = pairs_for(&pts[..12], &t);
-        let mut rng = SplitMix(23);
-        for p in pairs.iter_mut().take(12) {
-            let f = |rng: &mut SplitMix| (rng.below(2001) as f32 - 1000.0) * 8e-7;
-            p.camera += Vector3::new(f(&mut rng), f(&mut rng), f(&mut rng));
-        }
+        jitter_camera(&mut pairs[..12], 23, 8e-4);
         // One pose 7 mm off: within the 10 mm RANSAC threshold, far beyond the others' ~0.8 mm.
         pairs[4].camera += Vector3::new(0.0, 0.005, 0.005);
         let (mut r, mut ok) = ([0.0; 12], [false; 12]);
@@ -1026,11 +1031,7 @@ mod tests {
         let t = truth();
         let pts = poses(12);
         let mut pairs = pairs_for(&pts[..12], &t);
-        let mut rng = SplitMix(5);
-        for p in pairs.iter_mut().take(12) {
-            let f = |rng: &mut SplitMix| (rng.below(2001) as f32 - 1000.0) * 8e-6;
-            p.camera += Vector3::new(f(&mut rng), f(&mut rng), f(&mut rng));
-        }
+        jitter_camera(&mut pairs[..12], 5, 8e-3);
         let (mut r, mut ok) = ([0.0; 12], [false; 12]);
         let e = solve(&pairs[..12], &SolveOptions::default(), &mut r, &mut ok).unwrap_err();
         assert!(matches!(e, SolveError::ResidualTooLarge { .. }), "{e:?}");
