@@ -463,14 +463,10 @@ pub fn solve_with_axes(
             let cut = (trim * *med).max(options.trim_floor_m);
             let kept = pairs.iter().filter(|p| residual(&t, p) < cut).count();
             if cut < thr && kept >= needed && kept < count {
-                let mut t2 = t;
-                let mut c2 = kept;
-                let score2 = |t: &Isometry3| pairs.iter().filter(|p| residual(t, p) < cut).count();
-                refine_with(pairs, axes, options, cut, 0.5 * cut, &mut t2, &mut c2, &score2);
-                if score2(&t2) >= needed {
-                    t = t2;
-                    thr = cut;
-                }
+                // The refinement never takes a round that loses pairs under the cut, so `needed` stay.
+                let mut kept = kept;
+                refine(pairs, axes, options, cut, 0.5 * cut, &mut t, &mut kept);
+                thr = cut;
             }
         }
     }
@@ -524,7 +520,7 @@ pub fn uncertainty(
     t: &Isometry3,
     axial_weight: f32,
 ) -> Option<Uncertainty> {
-    let w = if axial_weight.is_finite() && axial_weight > 0.0 && axial_weight < 1.0 {
+    let w = if anisotropic(axial_weight) {
         axial_weight
     } else {
         1.0
@@ -535,15 +531,7 @@ pub fn uncertainty(
         if !inliers.get(i).copied().unwrap_or(false) {
             continue;
         }
-        let q = t.rotation * p.camera.coords;
-        let r = p.robot_base.coords - (q + t.translation.vector);
-        let mut wm = Matrix3::identity();
-        if let Some(a) = axes.get(i).filter(|a| a.norm_squared() > 0.5) {
-            wm -= a * a.transpose() * (1.0 - w);
-        }
-        let mut j = nalgebra::Matrix3x6::<f32>::zeros();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
-        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+        let (r, wm, j) = weighted_terms(p, axes.get(i), t, w);
         h += j.transpose() * wm * j;
         chi2 += (r.transpose() * wm * r)[0];
         k += 1;
@@ -571,7 +559,8 @@ pub fn uncertainty(
 /// Most pairs the second cut looks at (more are solved without it).
 const TRIM_MAX_PAIRS: usize = 128;
 
-/// The refinement after RANSAC with the plain inlier count under `thr` as the score.
+/// Kabsch over the pairs within `thr` with Huber weights (full weight within `huber`), a few rounds, then the
+/// axis-weighted Gauss-Newton rounds; a round that would lose pairs within `thr` (`count` of them now) is not taken.
 fn refine(
     pairs: &[Pair],
     axes: &[Vector3],
@@ -582,22 +571,6 @@ fn refine(
     count: &mut usize,
 ) {
     let score = |t: &Isometry3| pairs.iter().filter(|p| residual(t, p) < thr).count();
-    refine_with(pairs, axes, options, thr, huber, t, count, &score);
-}
-
-/// Kabsch over the pairs within `thr` with Huber weights (full weight within `huber`), a few rounds, then the
-/// axis-weighted Gauss-Newton rounds; a round that would lose pairs under `score` is not taken.
-#[allow(clippy::too_many_arguments)]
-fn refine_with(
-    pairs: &[Pair],
-    axes: &[Vector3],
-    options: &SolveOptions,
-    thr: f32,
-    huber: f32,
-    t: &mut Isometry3,
-    count: &mut usize,
-    score: &dyn Fn(&Isometry3) -> usize,
-) {
     for _ in 0..options.refine_iterations {
         let cur = *t;
         let weight = |i: usize| {
@@ -619,7 +592,7 @@ fn refine_with(
         *count = c;
     }
     let w = options.axial_weight;
-    if w.is_finite() && w > 0.0 && w < 1.0 && axes.iter().any(|a| a.norm_squared() > 0.5) {
+    if anisotropic(w) && axes.iter().any(|a| a.norm_squared() > 0.5) {
         for _ in 0..ANISOTROPIC_ROUNDS {
             let Some(next) = anisotropic_step(pairs, axes, t, thr, huber, w) else {
                 break;
@@ -632,6 +605,32 @@ fn refine_with(
             *count = c;
         }
     }
+}
+
+/// Whether an axial weight makes the refinement anisotropic (in (0, 1); anything else is isotropic).
+fn anisotropic(w: f32) -> bool {
+    w.is_finite() && w > 0.0 && w < 1.0
+}
+
+/// A pair's residual `rb − (R cam + t)`, its weight `I − (1 − w) a aᵀ` (`a` its axis; `I` without one: zero or
+/// missing) and the Jacobian of the prediction: `d(R cam + t) = δθ × q + δt` with `q = R cam`, so `[−[q]×, I]`
+/// (the rotation updated on the left).
+fn weighted_terms(
+    p: &Pair,
+    axis: Option<&Vector3>,
+    t: &Isometry3,
+    w: f32,
+) -> (Vector3, Matrix3, nalgebra::Matrix3x6<f32>) {
+    let q = t.rotation * p.camera.coords;
+    let r = p.robot_base.coords - (q + t.translation.vector);
+    let mut wm = Matrix3::identity();
+    if let Some(a) = axis.filter(|a| a.norm_squared() > 0.5) {
+        wm -= a * a.transpose() * (1.0 - w);
+    }
+    let mut j = nalgebra::Matrix3x6::<f32>::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
+    j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
+    (r, wm, j)
 }
 
 /// Gauss-Newton rounds of the axis-weighted refinement.
@@ -653,23 +652,13 @@ fn anisotropic_step(
     let mut g = nalgebra::Vector6::<f32>::zeros();
     let mut used = 0usize;
     for (i, p) in pairs.iter().enumerate() {
-        let q = t.rotation * p.camera.coords;
-        let r = p.robot_base.coords - (q + t.translation.vector);
+        let (r, wm, j) = weighted_terms(p, axes.get(i), t, w);
         let d = r.norm();
         if d.is_nan() || d >= thr {
             continue;
         }
         let hw = if d <= huber { 1.0 } else { huber / d };
-        let mut wm = Matrix3::identity();
-        if let Some(a) = axes.get(i).filter(|a| a.norm_squared() > 0.5) {
-            wm -= a * a.transpose() * (1.0 - w);
-        }
-        let wm = wm * hw;
-        // d(R cam + t) = δθ × q + δt: the Jacobian of the prediction is [−[q]×, I].
-        let mut j = nalgebra::Matrix3x6::<f32>::zeros();
-        j.fixed_view_mut::<3, 3>(0, 0).copy_from(&(-q.cross_matrix()));
-        j.fixed_view_mut::<3, 3>(0, 3).copy_from(&Matrix3::identity());
-        let jw = j.transpose() * wm;
+        let jw = j.transpose() * (wm * hw);
         h += jw * j;
         g += jw * r;
         used += 1;
