@@ -796,12 +796,10 @@ impl<'m, 's> Tracker<'m, 's> {
             // The scratch lengths were checked when the tracker was built.
             return;
         };
-        self.pose = camera_from_body
+        let pose = camera_from_body
             .map(|c| c * torso.body_from_torso)
             .or_else(|| observed.and_then(torso::a_from_torso));
-        self.torso = Some(torso);
-        self.shape_revision = self.shape_revision.wrapping_add(1);
-        self.last_shape_frame = None;
+        self.adopt_torso(torso, pose);
         self.init.refits_left = if observed.is_some() {
             self.cfg.lock_refits
         } else {
@@ -856,11 +854,16 @@ impl<'m, 's> Tracker<'m, 's> {
         let Some(torso) = self.shaped_torso(t.bed, self.init.refit_sum.map(|s| s / n)) else {
             return;
         };
-        self.pose = Some(camera_from_body * torso.body_from_torso);
-        self.torso = Some(torso);
+        self.adopt_torso(torso, Some(camera_from_body * torso.body_from_torso));
         self.last_good_pose = self.pose;
         // The support a right fit reaches depends on the shape: measure it afresh.
         self.support_ref = None;
+    }
+
+    /// Make `torso` the tracked model at `pose`: a new shape revision, announced on the next frame.
+    fn adopt_torso(&mut self, torso: TorsoModel, pose: Option<Isometry3>) {
+        self.pose = pose;
+        self.torso = Some(torso);
         self.shape_revision = self.shape_revision.wrapping_add(1);
         self.last_shape_frame = None;
     }
