@@ -940,6 +940,22 @@ impl<'m, 's> Tracker<'m, 's> {
         best.map(|(_, pose)| pose * body_from_torso.inverse())
     }
 
+    /// [`TorsoFit::follows`] from the temporal start `prior`, for the feedback variant, by a fit that lies on the
+    /// bed.
+    fn follows(
+        &self,
+        prior: Option<Isometry3>,
+        pose: &Isometry3,
+        fit: &TorsoFit,
+        q: FitQuality,
+        min_support: f32,
+        bed: &BedScene,
+    ) -> bool {
+        self.cfg.variant == Variant::ForestIcpFeedback
+            && prior.is_some_and(|p| fit.follows(&self.cfg.icp, q, min_support, &p, pose))
+            && lies_on_bed(pose, bed)
+    }
+
     fn track(
         &mut self,
         frame: &DepthFrame<'_>,
@@ -1017,6 +1033,10 @@ impl<'m, 's> Tracker<'m, 's> {
             }
             let from_prior =
                 |i: usize| i == 0 && prior_pose.is_some() && variant == Variant::ForestIcpFeedback;
+            let min_support = match (prior_pose, self.support_ref) {
+                (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
+                _ => icp_cfg.min_support,
+            };
             let mut best: Option<(Isometry3, TorsoFit, FitQuality)> = None;
             for (i, start) in starts.iter().enumerate() {
                 let (pose, fit) = torso_icp::fit_torso(
@@ -1040,10 +1060,6 @@ impl<'m, 's> Tracker<'m, 's> {
                     clock,
                     watch,
                 );
-                let min_support = match (prior_pose, self.support_ref) {
-                    (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
-                    _ => icp_cfg.min_support,
-                };
                 let mut q = fit.quality(&icp_cfg, min_support, prior_pose.is_none());
                 if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
@@ -1067,8 +1083,12 @@ impl<'m, 's> Tracker<'m, 's> {
                 if better {
                     best = Some((pose, fit, q));
                 }
-                // A good fit from the temporal start is the common case: no second opinion needed.
-                if q == FitQuality::Good && prior_pose.is_some() {
+                // A good fit from the temporal start is the common case: no second opinion needed. Nor for an
+                // occluded one the pose follows: the other starts' fits would only be judged against it.
+                if prior_pose.is_some()
+                    && (q == FitQuality::Good
+                        || (from_prior(i) && self.follows(prior_pose, &pose, &fit, q, min_support, &t.bed)))
+                {
                     break;
                 }
                 if !budget::iteration_fits(
@@ -1099,6 +1119,11 @@ impl<'m, 's> Tracker<'m, 's> {
                                 (Some(_), Some(r)) => r + SUPPORT_FOLLOW * (sup - r),
                                 _ => sup,
                             });
+                        }
+                        FitQuality::Occluded
+                            if self.follows(prior_pose, &pose, &fit, q, min_support, &t.bed) =>
+                        {
+                            self.pose = Some(pose);
                         }
                         // Coasting: the pose stays where the last good fit left it.
                         FitQuality::Occluded | FitQuality::Failed => {

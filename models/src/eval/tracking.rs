@@ -59,6 +59,10 @@ pub struct TrackingEvalArgs {
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
     pub search_shape_start: bool,
+    /// Turn on the tracker's `follow_occluded` (off by default): while the torso is mostly hidden, the pose follows
+    /// fits from the temporal start that pass the acquisition's floors instead of coasting.
+    #[arg(long)]
+    pub follow_occluded: bool,
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]
     pub lock_refits: Option<u8>,
@@ -188,6 +192,7 @@ pub fn run_variant(
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
     cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
     cfg.search_shape_start = args.search_shape_start;
+    cfg.icp.follow_occluded = args.follow_occluded;
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
     }
