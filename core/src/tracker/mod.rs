@@ -119,6 +119,11 @@ pub struct TrackerConfig {
     /// on a view with the arm can be 15-25 cm off, so it barely moves the shape; a refit from a confirmed tracked
     /// pose starts where ICP already holds the torso (docs/tracking.md, "Shape refit on lock").
     pub lock_refits: u8,
+    /// The lock refits hold the torso's lowest point on the mattress ([`fit::fit_shape_on_bed`]; `None`, the
+    /// default: free). The front surface alone cannot tell a thick patient from a thin one nearer the camera, and the
+    /// bed pins the back; but it helped on validation (torso 17.1 -> 16.2 mm) and hurt on held-out sequences (8.2 ->
+    /// 9.7 mm), so it is not the default (docs/tracking.md).
+    pub refit_bed_contact: Option<fit::BedContact>,
     /// Bed-plane search.
     pub planes: PlaneConfig,
     /// Up in the camera frame when known (from the calibration), for the bed search.
@@ -156,6 +161,7 @@ impl Default for TrackerConfig {
             torso_coeffs,
             search_shape_start: false,
             lock_refits: 3,
+            refit_bed_contact: None,
             planes: PlaneConfig::default(),
             up_camera: None,
             forest_samples: 0,
@@ -808,7 +814,8 @@ impl<'m, 's> Tracker<'m, 's> {
         self.machine.init_done();
     }
 
-    /// One lock refit: Eq. 7 from the tracked pose `camera_from_torso` and the init phase's shape; after
+    /// One lock refit: Eq. 7 (with the bed contact, when configured) from the tracked pose `camera_from_torso` and
+    /// the init phase's shape; after
     /// the last one the refits' mean shape becomes the torso model (a new shape revision) and the pose moves to the
     /// last refit's. A refit that fails still counts; one that does not fit in the budget waits for the next frame.
     fn refit_on_lock(
@@ -830,16 +837,15 @@ impl<'m, 's> Tracker<'m, 's> {
         // the init estimate is close to the mean and carries little, and holding the non-torso coefficients at it
         // left torso errors 1.4x as large (docs/tracking.md, "Shape refit on lock").
         let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed));
-        if let Ok(r) = fit::fit_shape(
-            &body,
-            frame,
-            &self.k,
-            &t.shape,
-            camera_from_torso * t.body_from_torso.inverse(),
-            &params,
-            self.scratch.fit_points,
-            self.scratch.fit_normals,
-        ) {
+        let start = camera_from_torso * t.body_from_torso.inverse();
+        let (points, normals) = (&mut *self.scratch.fit_points, &mut *self.scratch.fit_normals);
+        let refit = match &self.cfg.refit_bed_contact {
+            Some(c) => fit::fit_shape_on_bed(
+                &body, frame, &self.k, &t.shape, start, &params, c, points, normals,
+            ),
+            None => fit::fit_shape(&body, frame, &self.k, &t.shape, start, &params, points, normals),
+        };
+        if let Ok(r) = refit {
             for (s, x) in self.init.refit_sum.iter_mut().zip(r.shape) {
                 *s += x;
             }

@@ -63,6 +63,10 @@ pub struct TrackingEvalArgs {
     /// fits from the temporal start that pass the acquisition's floors instead of coasting.
     #[arg(long)]
     pub follow_occluded: bool,
+    /// The lock refits with the bed contact (the tracker's `refit_bed_contact`, off by default: the torso's lowest
+    /// point held on the mattress).
+    #[arg(long)]
+    pub refit_bed_contact: bool,
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]
     pub lock_refits: Option<u8>,
@@ -193,6 +197,9 @@ pub fn run_variant(
     cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
     cfg.search_shape_start = args.search_shape_start;
     cfg.icp.follow_occluded = args.follow_occluded;
+    if args.refit_bed_contact {
+        cfg.refit_bed_contact = Some(supine_core::fit::BedContact::default());
+    }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
     }
