@@ -815,9 +815,9 @@ impl<'m, 's> Tracker<'m, 's> {
     }
 
     /// One lock refit: Eq. 7 (with the bed contact, when configured) from the tracked pose `camera_from_torso` and
-    /// the init phase's shape; after
-    /// the last one the refits' mean shape becomes the torso model (a new shape revision) and the pose moves to the
-    /// last refit's. A refit that fails still counts; one that does not fit in the budget waits for the next frame.
+    /// the init phase's shape; after the last one the refits' mean shape becomes the torso model (a new shape
+    /// revision) and the pose moves to the last refit's. A refit that fails still counts; one that does not fit in
+    /// the budget waits for the next frame.
     fn refit_on_lock(
         &mut self,
         frame: &DepthFrame<'_>,
