@@ -1,8 +1,9 @@
 //! `supine calibrate` without `--guess`: collect the still frames of each pose (at most [`FRAMES_PER_POSE`]) and
 //! every arm state, start from the guess-free detection over one frame per pose
 //! (`supine_core::calib::rough_extrinsic`), then run the calibration session twice over the kept frames: with the
-//! rough result as prior (6 cm), then with that pass's solution (2 cm), as `supine-models eval calibration`
-//! measures it.
+//! rough result as prior (6 cm), then with that pass's solution (2 cm), and when those poses agree loosely up to
+//! three more passes, each from the last solve, keeping the tightest (`calib_host::settle_passes`), as
+//! `supine-models eval calibration` measures it.
 //!
 //! Memory: one depth frame (600 KB at 640x480) per kept frame, at most `FRAMES_PER_POSE` per pose (about 5 MB a
 //! pose), freed when the command ends. Cost: one stillness test per frame while collecting; afterwards one
@@ -213,11 +214,21 @@ pub fn collect(
         first_solution.inliers,
         first_solution.rms_residual_m * 1000.0
     );
-    let config = SessionConfig {
+    let refined = |prior| SessionConfig {
         guess_uncertainty_m: REFINED_UNCERTAINTY_M,
-        ..SessionConfig::new(first_solution.robot_base_from_camera)
+        ..SessionConfig::new(prior)
     };
-    let pass2 = replay(&kept, &arms, k, config, poses)?;
+    let pass2 = replay(
+        &kept,
+        &arms,
+        k,
+        refined(first_solution.robot_base_from_camera),
+        poses,
+    )?;
+    let pass2 = supine_drivers::calib_host::settle_passes(pass2, poses, |prior| {
+        eprintln!("the poses agree loosely: another pass from the last solve");
+        replay(&kept, &arms, k, refined(prior), poses)
+    })?;
     if pass2.len() < 4 {
         return Err(anyhow::anyhow!(
             "no extrinsic: the probe was found in only {} poses after the guess-free start",

@@ -4,7 +4,8 @@
 //! without a patient on the bed, and how the error moves points on the torso (probe-mapping error).
 //!
 //! Two passes per pose count, as an integrator would run it: the nominal guess (the mount drawing, in
-//! `sequence.json`) as the detector's prior, then the first pass's result as the prior of the second.
+//! `sequence.json`) as the detector's prior, then the first pass's result as the prior of the second; when the
+//! second pass's poses agree loosely, up to three more (`calib_host::settle_passes`, as `supine calibrate` does).
 //! Cost: one .oni decode and one tip detection per frame and pass (~5 ms a frame).
 
 use anyhow::{Context, Result, bail};
@@ -317,11 +318,14 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
                 continue;
             }
         };
-        let config = SessionConfig {
+        let refined = |prior| SessionConfig {
             guess_uncertainty_m: REFINED_UNCERTAINTY_M,
-            ..SessionConfig::new(pass1.robot_base_from_camera)
+            ..SessionConfig::new(prior)
         };
-        let (second, stats) = run_session(&oni, &arm, config, n)?;
+        let (second, stats) = run_session(&oni, &arm, refined(pass1.robot_base_from_camera), n)?;
+        let second = supine_drivers::calib_host::settle_passes(second, n, |prior| {
+            run_session(&oni, &arm, refined(prior), n).map(|(poses, _)| poses)
+        })?;
         o.frames_still = stats.still;
         o.frames_no_tip = stats.no_probe + stats.ambiguous;
         if second.len() < n {
