@@ -98,12 +98,8 @@ pub fn settle_passes<E>(
     n: usize,
     mut pass: impl FnMut(Isometry3) -> Result<Vec<PoseObservation>, E>,
 ) -> Result<Vec<PoseObservation>, E> {
-    let lenient = SolveOptions {
-        max_rms_residual_m: f32::INFINITY,
-        ..SolveOptions::default()
-    };
     let agreement = |p: &[PoseObservation]| {
-        solve_poses(&p[..n.min(p.len())], &lenient)
+        solve_poses(&p[..n.min(p.len())], &SolveOptions::lenient())
             .ok()
             .map(|(s, _, _)| (s.rms_residual_m, s.robot_base_from_camera))
     };

@@ -48,6 +48,17 @@ pub struct SolveOptions {
     pub trim_floor_m: f32,
 }
 
+impl SolveOptions {
+    /// The defaults without the RMS residual refusal: for a pass whose solve only has to improve the next pass's
+    /// prior, or to say how well its poses agree.
+    pub fn lenient() -> Self {
+        SolveOptions {
+            max_rms_residual_m: f32::INFINITY,
+            ..SolveOptions::default()
+        }
+    }
+}
+
 impl Default for SolveOptions {
     /// 10 mm inlier threshold, 2000 hypotheses, at least 4 pairs, condition up to 30, 5 refinement rounds, RMS
     /// residual up to 5 mm, axial weight 0.25 (per pose, the validation sequences' detections scatter about

@@ -81,8 +81,7 @@ impl Default for StartOptions {
 pub fn rough_solve_options() -> SolveOptions {
     SolveOptions {
         inlier_threshold_m: 0.04,
-        max_rms_residual_m: f32::INFINITY,
-        ..SolveOptions::default()
+        ..SolveOptions::lenient()
     }
 }
 

@@ -202,11 +202,7 @@ pub fn collect(
     // Two passes of the session over the kept frames: the rough prior, then the first pass's solution.
     let config = SessionConfig::new(rough.0.robot_base_from_camera);
     let pass1 = replay(&kept, &arms, k, config, poses)?;
-    let lenient = SolveOptions {
-        max_rms_residual_m: f32::INFINITY,
-        ..SolveOptions::default()
-    };
-    let (first_solution, _, _) = supine_drivers::calib_host::solve_poses(&pass1, &lenient)
+    let (first_solution, _, _) = supine_drivers::calib_host::solve_poses(&pass1, &SolveOptions::lenient())
         .map_err(|e| anyhow::anyhow!("no extrinsic: first pass after the guess-free start: {e}"))?;
     eprintln!(
         "first pass: {} poses, {} agree (rms residual {:.1} mm)",

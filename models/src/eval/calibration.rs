@@ -159,10 +159,11 @@ pub fn solve_poses(
     poses: &[PoseObservation],
     lenient: bool,
 ) -> Result<Solution, supine_core::calib::SolveError> {
-    let mut options = SolveOptions::default();
-    if lenient {
-        options.max_rms_residual_m = f32::INFINITY;
-    }
+    let options = if lenient {
+        SolveOptions::lenient()
+    } else {
+        SolveOptions::default()
+    };
     supine_drivers::calib_host::solve_poses(poses, &options).map(|(s, _, _)| s)
 }
 
