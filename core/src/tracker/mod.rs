@@ -946,22 +946,6 @@ impl<'m, 's> Tracker<'m, 's> {
         best.map(|(_, pose)| pose * body_from_torso.inverse())
     }
 
-    /// [`TorsoFit::follows`] from the temporal start `prior`, for the feedback variant, by a fit that lies on the
-    /// bed.
-    fn follows(
-        &self,
-        prior: Option<Isometry3>,
-        pose: &Isometry3,
-        fit: &TorsoFit,
-        q: FitQuality,
-        min_support: f32,
-        bed: &BedScene,
-    ) -> bool {
-        self.cfg.variant == Variant::ForestIcpFeedback
-            && prior.is_some_and(|p| fit.follows(&self.cfg.icp, q, min_support, &p, pose))
-            && lies_on_bed(pose, bed)
-    }
-
     fn track(
         &mut self,
         frame: &DepthFrame<'_>,
@@ -1043,7 +1027,8 @@ impl<'m, 's> Tracker<'m, 's> {
                 (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
                 _ => icp_cfg.min_support,
             };
-            let mut best: Option<(Isometry3, TorsoFit, FitQuality)> = None;
+            // The best fit, and whether it moves the coasting pose (`TorsoIcpConfig::follow_occluded`).
+            let mut best: Option<(Isometry3, TorsoFit, FitQuality, bool)> = None;
             for (i, start) in starts.iter().enumerate() {
                 let (pose, fit) = torso_icp::fit_torso(
                     frame,
@@ -1080,21 +1065,20 @@ impl<'m, 's> Tracker<'m, 's> {
                     // minimum (the forest's start on a turned torso); coast instead, and re-acquire if it persists.
                     q = FitQuality::Failed;
                 }
+                let follows = prior_pose.is_some_and(|p| fit.follows(&icp_cfg, q, min_support, &p, &pose))
+                    && lies_on_bed(&pose, &t.bed);
                 let better = match &best {
                     None => true,
-                    Some((_, bf, bq)) => {
+                    Some((_, bf, bq, _)) => {
                         rank(q) > rank(*bq) || (rank(q) == rank(*bq) && fit.support() > bf.support())
                     }
                 };
                 if better {
-                    best = Some((pose, fit, q));
+                    best = Some((pose, fit, q, follows));
                 }
                 // A good fit from the temporal start is the common case: no second opinion needed. Nor for an
                 // occluded one the pose follows: the other starts' fits would only be judged against it.
-                if prior_pose.is_some()
-                    && (q == FitQuality::Good
-                        || (from_prior(i) && self.follows(prior_pose, &pose, &fit, q, min_support, &t.bed)))
-                {
+                if prior_pose.is_some() && (q == FitQuality::Good || (from_prior(i) && follows)) {
                     break;
                 }
                 if !budget::iteration_fits(
@@ -1110,7 +1094,7 @@ impl<'m, 's> Tracker<'m, 's> {
                     self.candidate = None;
                     (FitQuality::Failed, false)
                 }
-                Some((pose, fit, mut q)) => {
+                Some((pose, fit, mut q, follows)) => {
                     report.fit = fit;
                     report.fit_pose = Some(pose);
                     if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
@@ -1126,9 +1110,7 @@ impl<'m, 's> Tracker<'m, 's> {
                                 _ => sup,
                             });
                         }
-                        FitQuality::Occluded
-                            if self.follows(prior_pose, &pose, &fit, q, min_support, &t.bed) =>
-                        {
+                        FitQuality::Occluded if follows => {
                             self.pose = Some(pose);
                         }
                         // Coasting: the pose stays where the last good fit left it.

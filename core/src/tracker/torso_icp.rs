@@ -141,10 +141,11 @@ impl TorsoFit {
         prior: &Isometry3,
         pose: &Isometry3,
     ) -> bool {
+        if !cfg.follow_occluded || q != FitQuality::Occluded {
+            return false;
+        }
         let d = prior.inverse() * pose;
-        cfg.follow_occluded
-            && q == FitQuality::Occluded
-            && d.translation.vector.norm() <= cfg.follow_m
+        d.translation.vector.norm() <= cfg.follow_m
             && d.rotation.angle() <= cfg.follow_rad
             && self.quality(cfg, min_support, true) == FitQuality::Good
     }
