@@ -228,7 +228,7 @@ pub fn fit_shape(
     points: &mut [[f32; 3]],
     normals: &mut [[f32; 3]],
 ) -> Result<FitResult, FitError> {
-    fit(
+    fit_shape_with(
         body,
         frame,
         k,
@@ -256,7 +256,7 @@ pub fn fit_shape_on_bed(
     points: &mut [[f32; 3]],
     normals: &mut [[f32; 3]],
 ) -> Result<FitResult, FitError> {
-    fit(
+    fit_shape_with(
         body,
         frame,
         k,
@@ -269,8 +269,9 @@ pub fn fit_shape_on_bed(
     )
 }
 
+/// [`fit_shape`] with the bed contact when `contact` is given ([`fit_shape_on_bed`]), without it otherwise.
 #[allow(clippy::too_many_arguments)] // see fit_shape
-fn fit(
+pub fn fit_shape_with(
     body: &BodyModelView<'_>,
     frame: &DepthFrame<'_>,
     k: &Intrinsics,

@@ -839,13 +839,10 @@ impl<'m, 's> Tracker<'m, 's> {
         let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed));
         let start = camera_from_torso * t.body_from_torso.inverse();
         let (points, normals) = (&mut *self.scratch.fit_points, &mut *self.scratch.fit_normals);
-        let refit = match &self.cfg.refit_bed_contact {
-            Some(c) => fit::fit_shape_on_bed(
-                &body, frame, &self.k, &t.shape, start, &params, c, points, normals,
-            ),
-            None => fit::fit_shape(&body, frame, &self.k, &t.shape, start, &params, points, normals),
-        };
-        if let Ok(r) = refit {
+        let contact = self.cfg.refit_bed_contact.as_ref();
+        if let Ok(r) = fit::fit_shape_with(
+            &body, frame, &self.k, &t.shape, start, &params, contact, points, normals,
+        ) {
             for (s, x) in self.init.refit_sum.iter_mut().zip(r.shape) {
                 *s += x;
             }
