@@ -4,8 +4,8 @@
 
 use supine_core::calib::start::CANDIDATES_PER_POSE;
 use supine_core::calib::{
-    ArmSample, Candidate, Pair, PoseObservation, Solution, SolveError, SolveOptions, StartBuffers,
-    StartError, StartOptions, StartScratch, rough_extrinsic, solve_with_axes,
+    ArmSample, Candidate, Pair, PoseObservation, SessionConfig, Solution, SolveError, SolveOptions,
+    StartBuffers, StartError, StartOptions, StartScratch, rough_extrinsic, solve_with_axes,
 };
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
@@ -78,6 +78,17 @@ pub fn solve_poses(
     let (mut residuals, mut inliers) = (vec![0.0; pairs.len()], vec![false; pairs.len()]);
     let s = solve_with_axes(&pairs, &axes, options, &mut residuals, &mut inliers)?;
     Ok((s, residuals, inliers))
+}
+
+/// Prior uncertainty of a refined pass (one whose prior is an earlier pass's solve), metres.
+pub const REFINED_UNCERTAINTY_M: f32 = 0.02;
+
+/// The session settings of a refined pass from `prior`: the defaults with the [`REFINED_UNCERTAINTY_M`] window.
+pub fn refined_session(prior: Isometry3) -> SessionConfig {
+    SessionConfig {
+        guess_uncertainty_m: REFINED_UNCERTAINTY_M,
+        ..SessionConfig::new(prior)
+    }
 }
 
 /// The refined pass's poses agree worse than this (RMS residual of their solve, metres) before [`settle_passes`]

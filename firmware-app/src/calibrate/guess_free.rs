@@ -20,6 +20,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::geometry::Isometry3;
 use supine_core::time::Timestamp;
+use supine_drivers::calib_host::{refined_session, settle_passes};
 use supine_drivers::link::{self, Link};
 use supine_drivers::source::{DepthSource, SourceErrorKind};
 
@@ -30,8 +31,6 @@ use crate::failure::Failure;
 pub const FRAMES_PER_POSE: usize = 8;
 /// A still frame this far from the previous pose's arm tip starts a new pose, metres.
 const NEW_POSE_M: f32 = 0.01;
-/// Prior uncertainty of the second pass, metres.
-const REFINED_UNCERTAINTY_M: f32 = 0.02;
 
 /// A kept still frame.
 struct Kept {
@@ -210,20 +209,16 @@ pub fn collect(
         first_solution.inliers,
         first_solution.rms_residual_m * 1000.0
     );
-    let refined = |prior| SessionConfig {
-        guess_uncertainty_m: REFINED_UNCERTAINTY_M,
-        ..SessionConfig::new(prior)
-    };
     let pass2 = replay(
         &kept,
         &arms,
         k,
-        refined(first_solution.robot_base_from_camera),
+        refined_session(first_solution.robot_base_from_camera),
         poses,
     )?;
-    let pass2 = supine_drivers::calib_host::settle_passes(pass2, poses, |prior| {
+    let pass2 = settle_passes(pass2, poses, |prior| {
         eprintln!("the poses agree loosely: another pass from the last solve");
-        replay(&kept, &arms, k, refined(prior), poses)
+        replay(&kept, &arms, k, refined_session(prior), poses)
     })?;
     if pass2.len() < 4 {
         return Err(anyhow::anyhow!(

@@ -23,6 +23,7 @@ use supine_core::geometry::Isometry3;
 use supine_core::time::Timestamp;
 use supine_core::wire::stream::SerialDecoder;
 use supine_drivers::SourceErrorKind;
+use supine_drivers::calib_host::{refined_session, settle_passes};
 use supine_drivers::oni::OniReader;
 
 use crate::sequence::SequenceMeta;
@@ -30,8 +31,6 @@ use crate::sequence::calibration::CalibrationFrameTruth;
 
 /// Pose counts the report covers (keys of the JSON report).
 pub const POSE_COUNTS: [usize; 3] = [6, 10, 20];
-/// Prior uncertainty of the second pass, metres.
-pub const REFINED_UNCERTAINTY_M: f32 = 0.02;
 
 /// Arguments of `supine-models eval calibration`.
 #[derive(Debug, clap::Args)]
@@ -319,13 +318,9 @@ pub fn evaluate_sequence(dir: &Path, nominal_guess: bool) -> Result<Vec<Outcome>
                 continue;
             }
         };
-        let refined = |prior| SessionConfig {
-            guess_uncertainty_m: REFINED_UNCERTAINTY_M,
-            ..SessionConfig::new(prior)
-        };
-        let (second, stats) = run_session(&oni, &arm, refined(pass1.robot_base_from_camera), n)?;
-        let second = supine_drivers::calib_host::settle_passes(second, n, |prior| {
-            run_session(&oni, &arm, refined(prior), n).map(|(poses, _)| poses)
+        let (second, stats) = run_session(&oni, &arm, refined_session(pass1.robot_base_from_camera), n)?;
+        let second = settle_passes(second, n, |prior| {
+            run_session(&oni, &arm, refined_session(prior), n).map(|(poses, _)| poses)
         })?;
         o.frames_still = stats.still;
         o.frames_no_tip = stats.no_probe + stats.ambiguous;
