@@ -58,8 +58,8 @@ pub struct TorsoIcpConfig {
     pub acquire_min_visible: f32,
     /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
     pub occluded_below: f32,
-    /// While occluded, the pose follows a fit from the temporal start that passes the acquisition's floors and
-    /// moved at most `follow_m`/`follow_rad` from the last pose (the state stays occluded: no shape refit, no
+    /// While occluded, the pose follows the frame's best fit when it passes the acquisition's floors, lies on the
+    /// bed and is at most `follow_m`/`follow_rad` from the last pose (the temporal start's such fit ends the search) (the state stays occluded: no shape refit, no
     /// reference support change); otherwise the pose coasts where the last good fit left it, and a patient who
     /// rolls or shifts while their own arms hide 70-85 % of the torso drifts out from under it. Off by default:
     /// with the true shape it cuts the validation torso error (14.1 -> 11.2 mm), with the estimated shape it is a
@@ -129,10 +129,10 @@ impl TorsoFit {
         if n == 0 { 0.0 } else { a.inliers as f32 / n as f32 }
     }
 
-    /// Whether this fit from the temporal start `prior`, which ended at `pose` with verdict `q`, moves the coasting
-    /// pose ([`TorsoIcpConfig::follow_occluded`]): it is occluded, passes the floors an acquisition takes at once,
-    /// and moved by at most `follow_m`/`follow_rad` (a partial view's fit that jumps is a local minimum, not the
-    /// patient).
+    /// Whether this fit, which ended at `pose` with verdict `q`, moves the coasting pose `prior`
+    /// ([`TorsoIcpConfig::follow_occluded`]; the caller adds the bed test): it is occluded, passes the floors an
+    /// acquisition takes at once, and lies at most `follow_m`/`follow_rad` from `prior` (a partial view's fit that
+    /// jumps is a local minimum, not the patient).
     pub fn follows(
         &self,
         cfg: &TorsoIcpConfig,
