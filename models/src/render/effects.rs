@@ -60,6 +60,12 @@ pub struct EdgeEffects {
     /// fade.
     #[serde(default, skip_serializing_if = "is_zero_f32")]
     pub mixed_max_inv_m: f32,
+    /// Mixed pixels ramp from the near side to the far one across the band (the pixel next to the fattened edge
+    /// reads mostly the near disparity, the last mostly the far one, each uniform within its share; decided at the
+    /// pixel, not its jittered read) instead of each drawing uniformly between the two: the real frames spread a
+    /// small step over two or three pixels in order.
+    #[serde(default, skip_serializing_if = "is_false")]
+    pub mixed_ramp: bool,
 }
 
 impl EdgeEffects {
@@ -74,6 +80,10 @@ impl EdgeEffects {
 
 fn is_zero_f32(x: &f32) -> bool {
     *x == 0.0
+}
+
+fn is_false(x: &bool) -> bool {
+    !*x
 }
 
 /// Serde helper: skip a zero width, so manifests without the field stay as they were.
@@ -199,6 +209,37 @@ pub fn nearest_within(
         for x in x0..x1 {
             let (a, b) = (x.saturating_sub(r), (x + r + 1).min(w));
             out[y * w + x] = row[a..b].iter().cloned().fold(0.0, f32::max);
+        }
+    }
+}
+
+/// Whether a surface at `near` (1/z) lies nearer than one at `iz` by more than `min_step_m`: z_far − z_near >
+/// min_step, compared in 1/z without a division.
+pub fn nearer_by(iz: f32, near: f32, min_step_m: f32) -> bool {
+    iz > 0.0 && near > iz && (near - iz) > min_step_m * iz * near
+}
+
+/// For each pixel of the band, how far along the row (in pixels) the nearest surface lies that is nearer than the
+/// pixel by more than `min_step_m` ([`nearer_by`]), if within `r`; 0 where none is.
+/// Written into `out` (full-image indexing).
+pub fn distance_to_nearer(
+    buf: &RenderBuffers,
+    r: usize,
+    min_step_m: f32,
+    (x0, y0, x1, y1): (usize, usize, usize, usize),
+    out: &mut Vec<u8>,
+) {
+    let w = buf.width;
+    // Only the band is read back: no need to clear the rest.
+    out.resize(w * buf.height, 0);
+    let nearer = |iz: f32, near: f32| nearer_by(iz, near, min_step_m);
+    for y in y0..y1 {
+        let row = &buf.inv_z[y * w..(y + 1) * w];
+        for x in x0..x1 {
+            let iz = row[x];
+            out[y * w + x] = (1..=r.min(u8::MAX as usize))
+                .find(|&d| (x >= d && nearer(iz, row[x - d])) || (x + d < w && nearer(iz, row[x + d])))
+                .unwrap_or(0) as u8;
         }
     }
 }

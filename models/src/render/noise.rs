@@ -23,8 +23,9 @@
 //! each), so the whole chain is a few ns per pixel; only the requested rectangle is processed.
 
 use super::effects::{
-    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, is_zero_u8, mark_left_occlusion,
-    max_near_side_of_steps_left, near_side_of_steps, nearest_within, paint_blobs,
+    BlobCell, BlobDropouts, EdgeEffects, Registration, TemporalState, distance_to_nearer, is_zero_u8,
+    mark_left_occlusion, max_near_side_of_steps_left, near_side_of_steps, nearer_by, nearest_within,
+    paint_blobs,
 };
 use super::{Label, NO_TRIANGLE, RenderBuffers};
 use rand::RngCore;
@@ -114,7 +115,8 @@ impl Default for KinectNoise {
                 shadow_hole_min_width_px: 4,
                 mixed_px: 2,
                 mixed: 1.0,
-                mixed_max_inv_m: 0.08,
+                mixed_max_inv_m: 0.05,
+                mixed_ramp: true,
             }),
             jitter_keeps_valid: true,
             temporal_correlation: 0.5,
@@ -374,6 +376,7 @@ pub struct NoiseScratch {
     blob_cells: Vec<BlobCell>,
     near_iz: Vec<f32>,
     ring_iz: Vec<f32>,
+    ring_dist: Vec<u8>,
     hole_iz: Vec<f32>,
     steps: Vec<f32>,
     tables_for: Option<KinectNoise>,
@@ -570,6 +573,15 @@ impl KinectNoise {
             let r = e.fatten_px as usize;
             nearest_within(buf, r, band, &mut scratch.near_iz);
             nearest_within(buf, r + e.mixed_px as usize, band, &mut scratch.ring_iz);
+            if e.mixed_ramp {
+                distance_to_nearer(
+                    buf,
+                    r + e.mixed_px as usize,
+                    e.min_step_m,
+                    band,
+                    &mut scratch.ring_dist,
+                );
+            }
             if e.hole_px > 0 || e.shadow_hole_px > 0 {
                 // With only the shadow-side band this just clears `hole_iz` for the band (no step reaches ∞).
                 let reach = if e.hole_px > 0 { r + e.hole_px as usize } else { 0 };
@@ -667,11 +679,13 @@ impl KinectNoise {
                     || self.registration.is_some_and(|r| r.in_border(u, v, w, h))
                     || (self.shadow_at_pixel && scratch.shadow[own] && iz <= buf.inv_z[own]);
                 if let Some(e) = self.edges {
-                    // A background pixel next to a nearer surface: fattened within fatten_px, maybe mixed one
-                    // pixel beyond (1/z steps compared as z_far − z_near > min_step without a division).
-                    let jump = |near: f32| iz > 0.0 && near > iz && (near - iz) > e.min_step_m * iz * near;
-                    let (near, ring) = (scratch.near_iz[s], scratch.ring_iz[s]);
-                    if e.fatten_px > 0 && jump(near) {
+                    // A background pixel next to a nearer surface: fattened within fatten_px, maybe mixed
+                    // pixels beyond.
+                    let jump = |near: f32| nearer_by(iz, near, e.min_step_m);
+                    let near = scratch.near_iz[s];
+                    // A pixel of a ramp stays in it even where jitter reads the fattened edge.
+                    let in_ramp = e.mixed_ramp && scratch.ring_dist[own] > e.fatten_px;
+                    if e.fatten_px > 0 && jump(near) && !in_ramp {
                         iz = near;
                     } else if (e.hole_px > 0 || e.shadow_hole_px > 0)
                         && scratch.hole_iz[v * w + u] - iz >= 0.5 * e.hole_min_inv_m
@@ -679,12 +693,29 @@ impl KinectNoise {
                         // On the far side of a discontinuity within the window: no match, no depth (decided at
                         // the pixel itself, so jitter does not scatter the band into salt).
                         dropped = true;
-                    } else if jump(ring)
-                        && (((bits >> 36) & mask) as f32)
-                            < e.mixed_probability(ring - iz) * NORMAL_TABLE_LEN as f32
-                    {
-                        let a = ((bits >> 48) & mask) as f32 / NORMAL_TABLE_LEN as f32;
-                        iz += a * (ring - iz);
+                    } else {
+                        // A ramp is decided at the pixel itself (its place beyond the edge), so jitter does not
+                        // scramble its order; independent mixed pixels at the jittered read.
+                        let (at, far) = if e.mixed_ramp {
+                            (own, buf.inv_z[own])
+                        } else {
+                            (s, iz)
+                        };
+                        let ring = scratch.ring_iz[at];
+                        if nearer_by(far, ring, e.min_step_m)
+                            && (((bits >> 36) & mask) as f32)
+                                < e.mixed_probability(ring - far) * NORMAL_TABLE_LEN as f32
+                        {
+                            let mut a = ((bits >> 48) & mask) as f32 / NORMAL_TABLE_LEN as f32;
+                            if e.mixed_ramp {
+                                // The j-th pixel beyond the fattened edge lies 1 − j/(m+1) of the way from the
+                                // far side to the near one, give or take half a step: nearest first.
+                                let m = e.mixed_px as f32 + 1.0;
+                                let j = scratch.ring_dist[own].saturating_sub(e.fatten_px).max(1) as f32;
+                                a = (m - j - 0.5 + a) / m;
+                            }
+                            iz = far + a * (ring - far);
+                        }
                     }
                 }
                 out[y * rw + x] = if dropped
@@ -1364,6 +1395,10 @@ mod tests {
             assert!(err.contains(field), "{field}: {err}");
         }
         // Mixed pixels fade with the step: full up to half of mixed_max_inv_m, none from it on.
+        let e = EdgeEffects {
+            mixed_max_inv_m: 0.08,
+            ..e
+        };
         assert_eq!(e.mixed_probability(0.02), 1.0);
         assert!((e.mixed_probability(0.06) - 0.5).abs() < 1e-6);
         assert_eq!(e.mixed_probability(0.2), 0.0);
@@ -1476,5 +1511,68 @@ mod tests {
             (synthetic - n.quantisation_step(2.0) * 1000.0).abs() <= 1.0,
             "synthetic {synthetic}"
         );
+    }
+
+    #[test]
+    fn a_mixed_ramp_orders_the_pixels_beyond_a_small_step_nearest_first() {
+        // A 12 cm step (1/1.88 − 1/2 = 0.032 /m): below the hole threshold, so the band beyond the fattened pixel
+        // right of the box is mixed.
+        let mut r = plane_render(2.0);
+        let v = [
+            [-0.1, -0.1, 1.88],
+            [0.1, -0.1, 1.88],
+            [0.1, 0.1, 1.88],
+            [-0.1, 0.1, 1.88],
+        ];
+        r.draw(
+            &DrawMesh {
+                vertices: &v,
+                triangles: &[[0, 1, 2], [0, 2, 3]],
+                label: Label::Body,
+                triangle_part: None,
+                cull_back_faces: false,
+            },
+            &Isometry3::identity(),
+        );
+        let edges = |mixed_ramp: bool| EdgeEffects {
+            mixed_max_inv_m: 0.0,
+            mixed_ramp,
+            ..KinectNoise::default().edges.unwrap()
+        };
+        let noise = |mixed_ramp: bool| KinectNoise {
+            lateral_px: 0.0,
+            blobs: None,
+            edges: Some(edges(mixed_ramp)),
+            ..KinectNoise::default()
+        };
+        // Rows through the box; per row: (both band pixels strictly inside the step's middle 80 %, in ramp order).
+        let ramps = |mixed_ramp: bool| {
+            let img = noisy(&r, &noise(mixed_ramp), 4);
+            let (mut inside, mut ordered) = (0, 0);
+            for y in 220..260 {
+                let row = &img[y * 640..(y + 1) * 640];
+                let x = row.iter().rposition(|&d| d > 0 && d < 1895).unwrap(); // the fattened pixel
+                let (near, far) = (1880.0, 2000.0);
+                let (m1, m2) = (row[x + 1] as f32, row[x + 2] as f32);
+                let mid = |m: f32| m > near + 12.0 && m < far - 12.0;
+                if mid(m1) && mid(m2) {
+                    inside += 1;
+                    ordered += (m1 < m2) as u32;
+                }
+            }
+            (inside, ordered)
+        };
+        let (inside, ordered) = ramps(true);
+        assert!(
+            inside >= 38 && ordered >= 36,
+            "ramp: {inside} inside, {ordered} ordered of 40"
+        );
+        // Drawn independently (the old model), the two often fall outside or out of order (27 and 10 of 40).
+        let (inside, ordered) = ramps(false);
+        assert!(
+            inside <= 32 && ordered <= 20,
+            "independent: {inside} inside, {ordered} ordered of 40"
+        );
+        assert_eq!(noisy(&r, &noise(true), 4), noisy(&r, &noise(true), 4));
     }
 }
