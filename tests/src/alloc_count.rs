@@ -59,7 +59,9 @@ pub fn count_allocations<R>(f: impl FnOnce() -> R) -> (R, u64) {
 /// Whether the counter sees allocations in this binary (false when [`Counting`] is not the global allocator), so
 /// that a zero count cannot pass vacuously.
 pub fn counter_is_installed() -> bool {
-    let (v, n) = count_allocations(|| Vec::<u8>::with_capacity(std::hint::black_box(32)));
-    drop(v);
+    // black_box on the vector too: in release builds LLVM may otherwise elide the allocation and its free.
+    let (v, n) =
+        count_allocations(|| std::hint::black_box(Vec::<u8>::with_capacity(std::hint::black_box(32))));
+    drop(std::hint::black_box(v));
     n >= 1
 }
