@@ -45,13 +45,24 @@ pub struct FitParams {
     pub icp: IcpParams,
 }
 
+/// Eq. 7's Λ on the coefficients the combined fit leaves nearly free (the paper's "small"): 0.1, chosen on the
+/// validation bodies among 1e-3 to 1 (`eval shape --split validation --free-weight W`, docs/shape-eval.md); with
+/// 1e-3 the fit moved s3 away from a better regression estimate.
+pub const FREE_PRIOR_WEIGHT: f32 = 0.1;
+
 impl FitParams {
-    /// The paper's combined setting: λ = 0.1, Λ = 1e-3 on `torso` coefficients and 1 on the others.
+    /// The paper's combined setting: λ = 0.1, Λ = [`FREE_PRIOR_WEIGHT`] on `torso` coefficients and 1 on the
+    /// others.
     pub fn combined(icp: IcpParams, torso: &[usize]) -> FitParams {
+        Self::combined_with(icp, torso, FREE_PRIOR_WEIGHT)
+    }
+
+    /// [`Self::combined`] with Λ = `free_weight` on the `torso` coefficients.
+    pub fn combined_with(icp: IcpParams, torso: &[usize], free_weight: f32) -> FitParams {
         let mut prior_weight = [1.0; SHAPE_COMPONENTS];
         for &t in torso {
             if t < SHAPE_COMPONENTS {
-                prior_weight[t] = 1e-3;
+                prior_weight[t] = free_weight;
             }
         }
         FitParams {

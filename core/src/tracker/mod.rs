@@ -109,6 +109,10 @@ pub struct TrackerConfig {
     pub known_shape: Option<[f32; SHAPE_COMPONENTS]>,
     /// Shape coefficients that carry the torso (Eq. 7's weak prior on them; the rest are held near the estimate).
     pub torso_coeffs: [bool; SHAPE_COMPONENTS],
+    /// Eq. 7's Λ on `torso_coeffs` in the init phase's refinement: 1e-3. The shape evaluation's choice
+    /// ([`fit::FREE_PRIOR_WEIGHT`], 0.1) was a wash here on the 20 validation sequences with figures (torso 17.08 ->
+    /// 17.44 mm, probe 13.18 -> 12.75 mm; docs/tracking.md), so the tracker keeps the value it was tuned with.
+    pub shape_free_weight: f32,
     /// Whether the shape refinement starts from a rigid registration of the estimated torso (the forest's pose and
     /// the [`bed_search`] grid, best support) instead of the forest's points alone. Off by default: on validation
     /// sequences it tracked more frames (0.745 against 0.717) but with a larger torso error (20.9 against 16.2 mm;
@@ -159,6 +163,7 @@ impl Default for TrackerConfig {
             refine_shape: true,
             known_shape: None,
             torso_coeffs,
+            shape_free_weight: 1e-3,
             search_shape_start: false,
             lock_refits: 3,
             refit_bed_contact: None,
@@ -782,7 +787,11 @@ impl<'m, 's> Tracker<'m, 's> {
                         m += 1;
                     }
                 }
-                let params = FitParams::combined(torso_icp::icp_params(&self.cfg.icp, bed), &coeffs[..m]);
+                let params = FitParams::combined_with(
+                    torso_icp::icp_params(&self.cfg.icp, bed),
+                    &coeffs[..m],
+                    self.cfg.shape_free_weight,
+                );
                 if let Ok(r) = fit::fit_shape(
                     &body,
                     frame,

@@ -91,9 +91,12 @@ pub struct EvalShapeArgs {
     /// Weight of the bed-contact residual of the `combined_bed` method.
     #[arg(long, default_value_t = 1.0)]
     pub bed_weight: f32,
-    /// Coefficients the combined fit leaves nearly free (Λ = 1e-3), comma-separated [default: torso_coeffs].
+    /// Coefficients the combined fit leaves nearly free (Λ = --free-weight), comma-separated [default: torso_coeffs].
     #[arg(long, value_delimiter = ',')]
     pub free_coeffs: Option<Vec<usize>>,
+    /// Eq. 7's Λ on those coefficients [default: the fit's FREE_PRIOR_WEIGHT, 0.1].
+    #[arg(long)]
+    pub free_weight: Option<f32>,
     /// Write the report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -155,6 +158,10 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         a.free_coeffs.iter().flatten().all(|&c| c < 20),
         "--free-coeffs must name coefficients 0..19"
     );
+    anyhow::ensure!(
+        a.free_weight.is_none_or(|w| w.is_finite() && w >= 0.0),
+        "--free-weight must be a finite number ≥ 0"
+    );
     let cfg = EvalConfig {
         seed: a.seed,
         point_noise_m: a.point_noise_mm * 1e-3,
@@ -166,6 +173,7 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         joint_forest: a.joint_forest.clone(),
         bed_weight: a.bed_weight,
         free_coeffs: a.free_coeffs.clone(),
+        free_weight: a.free_weight.unwrap_or(supine_core::fit::FREE_PRIOR_WEIGHT),
     };
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);

@@ -241,6 +241,8 @@ pub struct EvalConfig {
     pub bed_weight: f32,
     /// Coefficients the combined fits leave nearly free (small Λ); `None` = `torso_coeffs`, as the paper did.
     pub free_coeffs: Option<Vec<usize>>,
+    /// Λ on those coefficients (`supine_core::fit::FREE_PRIOR_WEIGHT` by default).
+    pub free_weight: f32,
 }
 
 /// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients (`n` of them, none for 0).
@@ -365,7 +367,8 @@ pub fn evaluate(
             per_view.push(est.shape);
             // Combined: fit from the subspace estimate.
             let t1 = Instant::now();
-            let mut p = FitParams::combined(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso));
+            let mut p =
+                FitParams::combined_with(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso), cfg.free_weight);
             p.length_unit_m = cfg.length_unit_m;
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
                 fit_shape(

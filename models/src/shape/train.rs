@@ -434,6 +434,7 @@ mod tests {
             joint_forest: None,
             bed_weight: 1.0,
             free_coeffs: None,
+            free_weight: supine_core::fit::FREE_PRIOR_WEIGHT,
         };
         let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
         for m in ["subspace", "fitting", "combined", "combined_bed"] {
