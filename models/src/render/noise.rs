@@ -1058,23 +1058,7 @@ mod tests {
 
         // A box 0.5 m in front of a wall at 2 m: the projector (to the camera's right) leaves a band with no depth
         // immediately left of the box, about f·b·(1/z_near − 1/z_far) px wide.
-        let mut r = plane_render(2.0);
-        let v = [
-            [-0.1, -0.1, 1.5],
-            [0.1, -0.1, 1.5],
-            [0.1, 0.1, 1.5],
-            [-0.1, 0.1, 1.5],
-        ];
-        r.draw(
-            &DrawMesh {
-                vertices: &v,
-                triangles: &[[0, 1, 2], [0, 2, 3]],
-                label: Label::Body,
-                triangle_part: None,
-                cull_back_faces: false,
-            },
-            &Isometry3::identity(),
-        );
+        let r = box_render();
         let quiet = KinectNoise {
             lateral_px: 0.0,
             ..KinectNoise::default()
@@ -1116,13 +1100,13 @@ mod tests {
 
     /// A box 0.5 m in front of a wall at 2 m (as in the shadow test).
     fn box_render() -> Renderer {
+        box_at(1.5)
+    }
+
+    /// A 20 cm box at depth `z` in front of a wall at 2 m.
+    fn box_at(z: f32) -> Renderer {
         let mut r = plane_render(2.0);
-        let v = [
-            [-0.1, -0.1, 1.5],
-            [0.1, -0.1, 1.5],
-            [0.1, 0.1, 1.5],
-            [-0.1, 0.1, 1.5],
-        ];
+        let v = [[-0.1, -0.1, z], [0.1, -0.1, z], [0.1, 0.1, z], [-0.1, 0.1, z]];
         r.draw(
             &DrawMesh {
                 vertices: &v,
@@ -1517,23 +1501,7 @@ mod tests {
     fn a_mixed_ramp_orders_the_pixels_beyond_a_small_step_nearest_first() {
         // A 12 cm step (1/1.88 − 1/2 = 0.032 /m): below the hole threshold, so the band beyond the fattened pixel
         // right of the box is mixed.
-        let mut r = plane_render(2.0);
-        let v = [
-            [-0.1, -0.1, 1.88],
-            [0.1, -0.1, 1.88],
-            [0.1, 0.1, 1.88],
-            [-0.1, 0.1, 1.88],
-        ];
-        r.draw(
-            &DrawMesh {
-                vertices: &v,
-                triangles: &[[0, 1, 2], [0, 2, 3]],
-                label: Label::Body,
-                triangle_part: None,
-                cull_back_faces: false,
-            },
-            &Isometry3::identity(),
-        );
+        let r = box_at(1.88);
         let edges = |mixed_ramp: bool| EdgeEffects {
             mixed_max_inv_m: 0.0,
             mixed_ramp,
