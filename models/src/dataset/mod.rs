@@ -798,8 +798,8 @@ mod tests {
     #[test]
     fn the_default_before_the_mixed_ramp_reproduces_its_datasets() {
         // The default noise of commit 3852201 (independent mixed pixels fading out by 0.08 /m), as a manifest made
-        // then spells it: its datasets stay byte-identical with the ramp in the code. The hashes were taken with the
-        // ramp's code and checked against that commit's binary on a 72-image dataset (every body file equal).
+        // then spells it: its datasets stay byte-identical with the ramp in the code. The same test run on 3852201's
+        // own tree gives these hashes (and that commit's binary made a 72-image dataset equal file for file).
         let before: KinectNoise = serde_json::from_str(
             r#"{"disparity_focal_px": 575.8, "baseline_m": 0.075, "subpixel_steps": 8.0, "axial_const_m": 0.0012,
             "axial_quad_m": 0.0019, "lateral_px": 0.8, "max_incidence_rad": 1.4835298, "min_m": 0.5, "max_m": 4.5,
