@@ -398,8 +398,7 @@ fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
 
 /// Whether two torso poses are the same within the confirmation tolerances.
 fn same_pose(a: &Isometry3, b: &Isometry3, cfg: &TorsoIcpConfig) -> bool {
-    let d = a.inverse() * b;
-    d.translation.vector.norm() <= cfg.confirm_m && d.rotation.angle() <= cfg.confirm_rad
+    torso_icp::within(a, b, cfg.confirm_m, cfg.confirm_rad)
 }
 
 /// Per good tracking frame, the share by which the reference support follows the fit's (a slow follow: a pose

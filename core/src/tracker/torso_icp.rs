@@ -59,8 +59,8 @@ pub struct TorsoIcpConfig {
     /// A fit that is not good while less than this share is visible counts as occluded rather than failed.
     pub occluded_below: f32,
     /// While occluded, the pose follows the frame's best fit when it passes the acquisition's floors, lies on the
-    /// bed and is at most `follow_m`/`follow_rad` from the last pose (the temporal start's such fit ends the search) (the state stays occluded: no shape refit, no
-    /// reference support change); otherwise the pose coasts where the last good fit left it, and a patient who
+    /// bed and is at most `follow_m`/`follow_rad` from the last pose; such a fit from the temporal start ends the
+    /// search over starts, and the state stays occluded (no shape refit, no reference support change). Otherwise the pose coasts where the last good fit left it, and a patient who
     /// rolls or shifts while their own arms hide 70-85 % of the torso drifts out from under it. Off by default:
     /// with the true shape it cuts the validation torso error (14.1 -> 11.2 mm), with the estimated shape it is a
     /// wash (partial views of a wrong shape pull the pose as much as they correct it; `docs/tracking.md`).
@@ -144,9 +144,7 @@ impl TorsoFit {
         if !cfg.follow_occluded || q != FitQuality::Occluded {
             return false;
         }
-        let d = prior.inverse() * pose;
-        d.translation.vector.norm() <= cfg.follow_m
-            && d.rotation.angle() <= cfg.follow_rad
+        within(prior, pose, cfg.follow_m, cfg.follow_rad)
             && self.quality(cfg, min_support, true) == FitQuality::Good
     }
 
@@ -181,6 +179,12 @@ impl TorsoFit {
             FitQuality::Failed
         }
     }
+}
+
+/// Whether `b` lies within `max_m` and `max_rad` of `a` (the relative transform's translation and angle).
+pub fn within(a: &Isometry3, b: &Isometry3, max_m: f32, max_rad: f32) -> bool {
+    let d = a.inverse() * b;
+    d.translation.vector.norm() <= max_m && d.rotation.angle() <= max_rad
 }
 
 /// The association parameters of the fit for a bed (its mattress and raised head section are not body), keeping
