@@ -156,11 +156,11 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
     v.push(("mixed_px_per_flat_jump".into(), flat(gaps)));
     // The sensor's own properties: split by step size and side, where the scenes' different mixes of steps (and
     // of near sides) no longer enter. A band or side with under 20 steps is left undefined.
-    let share = |b: &[[u64; 4]], sides: &[usize]| {
-        let (holes, all) = b.iter().fold((0, 0), |(h, a), x| {
-            let holes: u64 = sides.iter().map(|&s| x[2 + s]).sum();
-            (h + holes, a + holes + sides.iter().map(|&s| x[s]).sum::<u64>())
-        });
+    // Per band: `[jumps near right, jumps near left, holes near right, holes near left]`.
+    let share = |b: &[[u64; 4]], side: usize| {
+        let (holes, all) = b
+            .iter()
+            .fold((0, 0), |(h, a), x| (h + x[2 + side], a + x[2 + side] + x[side]));
         some_if(all >= 20, holes as f64 / all.max(1) as f64)
     };
     for (name, b) in [
@@ -171,7 +171,7 @@ pub fn scalars(c: &Counts) -> Vec<(String, Option<f64>)> {
         for (side, s) in ["right", "left"].iter().enumerate() {
             v.push((
                 format!("big_jumps_with_hole_share_{name}_near_{s}"),
-                share(b, &[side]),
+                share(b, side),
             ));
         }
     }

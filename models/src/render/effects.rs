@@ -232,13 +232,15 @@ pub fn distance_to_nearer(
     let w = buf.width;
     // Only the band is read back: no need to clear the rest.
     out.resize(w * buf.height, 0);
-    let nearer = |iz: f32, near: f32| nearer_by(iz, near, min_step_m);
     for y in y0..y1 {
         let row = &buf.inv_z[y * w..(y + 1) * w];
         for x in x0..x1 {
             let iz = row[x];
             out[y * w + x] = (1..=r.min(u8::MAX as usize))
-                .find(|&d| (x >= d && nearer(iz, row[x - d])) || (x + d < w && nearer(iz, row[x + d])))
+                .find(|&d| {
+                    (x >= d && nearer_by(iz, row[x - d], min_step_m))
+                        || (x + d < w && nearer_by(iz, row[x + d], min_step_m))
+                })
                 .unwrap_or(0) as u8;
         }
     }

@@ -680,12 +680,10 @@ impl KinectNoise {
                     || (self.shadow_at_pixel && scratch.shadow[own] && iz <= buf.inv_z[own]);
                 if let Some(e) = self.edges {
                     // A background pixel next to a nearer surface: fattened within fatten_px, maybe mixed
-                    // pixels beyond.
-                    let jump = |near: f32| nearer_by(iz, near, e.min_step_m);
+                    // pixels beyond. A pixel of a ramp stays in it even where jitter reads the fattened edge.
                     let near = scratch.near_iz[s];
-                    // A pixel of a ramp stays in it even where jitter reads the fattened edge.
                     let in_ramp = e.mixed_ramp && scratch.ring_dist[own] > e.fatten_px;
-                    if e.fatten_px > 0 && jump(near) && !in_ramp {
+                    if e.fatten_px > 0 && nearer_by(iz, near, e.min_step_m) && !in_ramp {
                         iz = near;
                     } else if (e.hole_px > 0 || e.shadow_hole_px > 0)
                         && scratch.hole_iz[v * w + u] - iz >= 0.5 * e.hole_min_inv_m
