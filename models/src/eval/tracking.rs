@@ -70,6 +70,9 @@ pub struct TrackingEvalArgs {
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]
     pub lock_refits: Option<u8>,
+    /// The tracker's `refit_min_visible`: a lock refit waits for a fit that sees this share of the torso.
+    #[arg(long)]
+    pub refit_min_visible: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -202,6 +205,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
+    }
+    if let Some(v) = args.refit_min_visible {
+        cfg.refit_min_visible = v;
     }
     if args.true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
