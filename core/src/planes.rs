@@ -8,16 +8,19 @@
 //! plane of the robot arm's links a bed's height above a mattress is not a mattress over a floor); when one plane is
 //! found alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the
 //! points lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not
-//! give. A raised head section is the largest plane tilted from up that rises from the mattress at a hinge and ends
-//! below the volume's top; the clip keeps only what lies above it as well. Up is the caller's (from
+//! give. A raised head section is the largest plane tilted from up that spans the bed, rises from the mattress at a
+//! hinge and ends below the volume's top; the clip keeps only what lies above it as well, and the bed's long axis
+//! runs up its slope. A patient on a raised section can hide the whole mattress: then a bed-wide tilted plane larger
+//! than the chosen mattress whose bottom lies well below it (an arm link's or the legs' flat top was chosen) or a
+//! bed's height above it (the floor was) places the mattress level through that bottom. Up is the caller's (from
 //! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
 //! steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once).
 //! Telling floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a
-//! million comparisons). The clip is one rigid transform and six comparisons per point. Nothing allocates: the
-//! caller lends the scratch.
+//! million comparisons). The head-section tests add a few passes over the points per tilted plane. The clip is one
+//! rigid transform and six comparisons per point. Nothing allocates: the caller lends the scratch.
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
@@ -162,6 +165,13 @@ impl VolumeOfInterest {
 const DEPTH_RANGE_M: (f32, f32) = (0.4, 6.0);
 /// Label of a sampled point not (yet) on any plane.
 const FREE: u8 = 0;
+/// A label no point carries (the mattress when it was placed through a head section's bottom, not found as a plane).
+const NO_LABEL: u8 = u8::MAX;
+/// A found mattress this far above the bottom of a raised head section is not the mattress, metres.
+const SECTION_BELOW_MATTRESS_M: f32 = 0.05;
+/// How far above the mattress the lowest visible part of a raised head section can lie, metres: the patient's hips
+/// hide the hinge, and beside them the arm or the view can hide the section's lower edge too (14 cm on s402).
+const SECTION_BOTTOM_HIDDEN_M: f32 = 0.15;
 /// Most planes searched for (floor, mattress, head section, the flat top of what lies on it, a wall).
 const MAX_PLANES: usize = 5;
 /// A plane this close to up is horizontal, degrees.
@@ -176,6 +186,11 @@ const HINGE_MIN_POINTS: u32 = 8;
 const HINGE_SHARE_INV: u32 = 200;
 /// A head section's normal lies within this angle of the plane of up and the bed's long axis, degrees.
 const HINGE_AXIS_DEG: f32 = 8.0;
+/// A head section's own inliers spread at least this far along its hinge line, as a standard deviation, metres (a
+/// uniform strip 0.45 m wide): it spans the bed (0.57-0.91 m between the 5th and 95th percentiles on the raised
+/// sections of the validation and diagnostic sequences), while a flat, tilted part of the body (a thigh, the
+/// chest) is narrower: s4008's 36° plane 0.37 m above the mattress spanned 0.30 m and was taken for a section.
+const SECTION_MIN_SPREAD_M: f32 = 0.13;
 /// The steepest head section looked for, degrees from horizontal.
 const MAX_HEAD_RAISE_DEG: f32 = 70.0;
 /// Height range of a mattress above the floor, metres (hospital and home beds).
@@ -299,16 +314,36 @@ pub fn estimate_bed(
     let cos_up = libm::cosf(HORIZONTAL_DEG.to_radians());
     // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
     // in depth layers a few centimetres apart, which may be found as planes of their own).
-    let (mattress, mattress_n) = found
+    let chosen = found
         .iter()
         .filter(|(p, _)| p.normal().dot(&up) >= cos_up && floor.is_none_or(|(f, _)| bed_height(&f, p)))
         .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
-        .copied()
-        .ok_or(PlaneError::NoPlane)?;
+        .copied();
+    // A patient on a raised head section can hide the whole mattress; then the flat top of an arm link, or the
+    // floor, is taken for it. The section still shows: its lowest points lie on the mattress (within 1-3 cm on 11 of
+    // 12 raised sections of the validation and diagnostic sequences), so a mattress far above or far below them is
+    // replaced by the level plane through them.
+    let bottom = section_bottom(points, labels, found, &up, floor.map(|(f, _)| f));
+    let (mattress, mattress_n) = match (chosen, bottom) {
+        (Some((m, n)), Some(b)) => {
+            let below = b.height_above(&m, points, labels);
+            // Above the section's bottom: an arm link's or the legs' flat top. A bed's height below it: the floor.
+            // Only a section larger than the chosen plane tells: the arm's links line up into tilted planes too,
+            // reaching from beside the bed's base to high above the mattress, but smaller than a visible mattress.
+            if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || below > FLOOR_TO_MATTRESS_M.0) {
+                (b.level(points, labels), 0)
+            } else {
+                (m, n)
+            }
+        }
+        (Some(m), None) => m,
+        (None, Some(b)) => (b.level(points, labels), 0),
+        (None, None) => return Err(PlaneError::NoPlane),
+    };
     let mattress_label = found
         .iter()
         .position(|(p, _)| *p == mattress)
-        .map_or(FREE, |i| i as u8 + 1);
+        .map_or(NO_LABEL, |i| i as u8 + 1);
     // A raised head section: tilted from up about the hinge line, which runs across the bed, so its normal lies in
     // the plane of up and the bed's long axis (taken here from everything lying on the mattress); rising above the
     // mattress from the hinge.
@@ -320,16 +355,34 @@ pub fn estimate_bed(
         long_axis(points, &mattress.normal(), &on).cross(&mattress.normal())
     };
     let sin_axis = libm::sinf(HINGE_AXIS_DEG.to_radians());
+    // The bed-wide tilted plane larger than the mattress, by its label: evidence enough of a section that two of
+    // the tests below are waived for it.
+    let larger = bottom
+        .filter(|b| b.points > mattress_n)
+        .map(|b| (b.label, b.height_above(&mattress, points, labels)));
     let head_section = found
         .iter()
-        .filter(|(p, _)| libm::fabsf(p.normal().dot(&coarse_across)) < sin_axis)
-        .filter(|(p, _)| {
+        .enumerate()
+        .filter(|(i, (p, _))| {
+            // The patient's long axis can be 10-20° off when the arm's links or the section's own points pull it.
+            libm::fabsf(p.normal().dot(&coarse_across)) < sin_axis
+                || larger.is_some_and(|(l, _)| l == *i as u8 + 1)
+        })
+        .filter(|(_, (p, _))| {
             let c = p.normal().dot(&up);
             c < cos_up && c > libm::cosf(MAX_HEAD_RAISE_DEG.to_radians())
         })
-        .filter(|(p, _)| rises_from_the_hinge(p, points, &mattress, cfg))
-        .max_by_key(|(_, m)| *m)
-        .map(|(p, _)| *p);
+        .filter(|(i, (p, _))| {
+            // The patient's hips and the arm can hide the hinge but for a few points; the larger plane's lowest
+            // points near the mattress show it rises from there just as well.
+            rises_from_the_hinge(p, points, &mattress, cfg)
+                || larger.is_some_and(|(l, h)| {
+                    l == *i as u8 + 1 && h > -SECTION_BELOW_MATTRESS_M && h < SECTION_BOTTOM_HIDDEN_M
+                })
+        })
+        .filter(|(i, (p, _))| spans_the_bed(p, &mattress.normal(), points, labels, *i as u8 + 1, found))
+        .max_by_key(|(_, (_, m))| *m)
+        .map(|(_, (p, _))| *p);
     let floor_n = floor.map_or(0, |(_, n)| n);
     let floor = floor.map(|(f, _)| f);
     let patient = |p: &Point3| {
@@ -358,12 +411,23 @@ pub fn estimate_bed(
     // Bed frame: z the mattress normal, y the patient's principal axis on the mattress, origin at the mattress
     // inliers' centroid projected on the plane.
     let nz = mattress.normal();
-    let along = long_axis(points, &nz, &patient);
+    // Along the bed: up the raised head section when there is one (its hinge runs across the bed), else the
+    // patient's principal axis.
+    let along = head_section
+        .and_then(|h| (nz * h.normal().dot(&nz) - h.normal()).try_normalize(1e-6))
+        .unwrap_or_else(|| long_axis(points, &nz, &patient));
     let across = along.cross(&nz);
     let mut centroid = Vector3::zeros();
     let mut count = 0.0f32;
     for (p, &l) in points.iter().zip(labels.iter()) {
         if l == mattress_label {
+            centroid += p.coords;
+            count += 1.0;
+        }
+    }
+    if count == 0.0 {
+        // A mattress placed through the section's bottom has no inliers of its own: centre on the patient.
+        for p in points.iter().filter(|p| patient(p)) {
             centroid += p.coords;
             count += 1.0;
         }
@@ -426,6 +490,156 @@ fn rises_from_the_hinge(plane: &Plane, points: &[Point3], mattress: &Plane, cfg:
         && at_hinge * HINGE_SHARE_INV >= n
         && below * 20 < n
         && above * 20 < n
+}
+
+/// The lowest part of the largest plane that is tilted like a raised head section (10-70° from `up`) and spans the
+/// bed: where the section meets the mattress.
+#[derive(Debug, Clone, Copy)]
+struct SectionBottom<'a> {
+    label: u8,
+    points: usize,
+    up: Vector3,
+    found: &'a [(Plane, usize)],
+    floor: Option<Plane>,
+}
+
+/// Share of a section's own points below its bottom (the hinge region beside the hips; the rest hides it).
+const SECTION_BOTTOM_SHARE: f32 = 0.01;
+
+impl SectionBottom<'_> {
+    /// The height above `plane` under which [`SECTION_BOTTOM_SHARE`] of the section's points lie, metres.
+    fn height_above(&self, plane: &Plane, points: &[Point3], labels: &[u8]) -> f32 {
+        // Not the strip of the floor where the section's plane crosses it, half a metre below the section.
+        let floor = |h: &Plane| self.floor == Some(*h);
+        let own = || {
+            section_points(points, labels, self.label, self.found, &floor).map(|p| plane.signed_distance(p))
+        };
+        low_quantile(own, SECTION_BOTTOM_SHARE)
+    }
+
+    /// The level plane (normal `up`) through the section's bottom.
+    fn level(&self, points: &[Point3], labels: &[u8]) -> Plane {
+        let reference = Plane {
+            normal: self.up.into(),
+            d: 0.0,
+        };
+        let h = self.height_above(&reference, points, labels);
+        Plane {
+            normal: self.up.into(),
+            d: -h,
+        }
+    }
+}
+
+fn section_bottom<'a>(
+    points: &[Point3],
+    labels: &[u8],
+    found: &'a [(Plane, usize)],
+    up: &Vector3,
+    floor: Option<Plane>,
+) -> Option<SectionBottom<'a>> {
+    let (cos_flat, cos_steep) = (
+        libm::cosf(HORIZONTAL_DEG.to_radians()),
+        libm::cosf(MAX_HEAD_RAISE_DEG.to_radians()),
+    );
+    found
+        .iter()
+        .enumerate()
+        .filter(|(_, (p, _))| {
+            let c = p.normal().dot(up);
+            c < cos_flat && c > cos_steep
+        })
+        .filter(|(i, (p, _))| spans_the_bed(p, up, points, labels, *i as u8 + 1, found))
+        .max_by_key(|(_, (_, m))| *m)
+        .map(|(i, (_, m))| SectionBottom {
+            label: i as u8 + 1,
+            points: *m,
+            up: *up,
+            found,
+            floor,
+        })
+}
+
+/// The points labelled `label` (a tilted plane's inliers) that lie on none of the planes in `found` that `strip`
+/// picks: where a tilted plane crosses the floor or the mattress, a strip of their points is within its inlier band
+/// too.
+fn section_points<'a>(
+    points: &'a [Point3],
+    labels: &'a [u8],
+    label: u8,
+    found: &'a [(Plane, usize)],
+    strip: &'a dyn Fn(&Plane) -> bool,
+) -> impl Iterator<Item = &'a Point3> + 'a {
+    points
+        .iter()
+        .zip(labels)
+        .filter(move |(_, l)| **l == label)
+        .map(|(p, _)| p)
+        .filter(move |p| {
+            !found
+                .iter()
+                .any(|(h, _)| strip(h) && libm::fabsf(h.signed_distance(p)) < LEVEL_STRIP_M)
+        })
+}
+
+/// Half-width of the strip of a level plane's points that a tilted plane's inlier band takes in where the two cross,
+/// metres (the search's inlier distance and a little).
+const LEVEL_STRIP_M: f32 = 0.015;
+
+/// The value under which `share` of the values `own` yields lie (1 cm bins over their range; 0 when none).
+fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32) -> f32 {
+    const BINS: usize = 256;
+    let (lo, hi, n) = own().fold((f32::INFINITY, f32::NEG_INFINITY, 0u32), |(lo, hi, n), x| {
+        (lo.min(x), hi.max(x), n + 1)
+    });
+    if n == 0 {
+        return 0.0;
+    }
+    let bin = ((hi - lo) / BINS as f32).max(0.01);
+    let mut hist = [0u32; BINS];
+    for x in own() {
+        hist[(((x - lo) / bin) as usize).min(BINS - 1)] += 1;
+    }
+    let want = ((share * n as f32).ceil() as u32).max(1);
+    let mut seen = 0;
+    for (i, c) in hist.iter().enumerate() {
+        seen += c;
+        if seen >= want {
+            return lo + (i as f32 + 0.5) * bin;
+        }
+    }
+    hi
+}
+
+/// Whether the points labelled `label` (a tilted plane's own inliers, off the level planes in `found`) spread along
+/// the plane's level lines (normal to `up`) as wide as a bed ([`SECTION_MIN_SPREAD_M`]).
+fn spans_the_bed(
+    plane: &Plane,
+    up: &Vector3,
+    points: &[Point3],
+    labels: &[u8],
+    label: u8,
+    found: &[(Plane, usize)],
+) -> bool {
+    let hinge = plane.normal().cross(up);
+    let Some(hinge) = hinge.try_normalize(1e-6) else {
+        return false;
+    };
+    let (mut n, mut sum, mut sq) = (0.0f64, 0.0f64, 0.0f64);
+    let cos_flat = libm::cosf(HORIZONTAL_DEG.to_radians());
+    let level = |h: &Plane| h.normal().dot(up) >= cos_flat;
+    for p in section_points(points, labels, label, found, &level) {
+        let x = hinge.dot(&p.coords) as f64;
+        n += 1.0;
+        sum += x;
+        sq += x * x;
+    }
+    if n < 2.0 {
+        return false;
+    }
+    let mean = sum / n;
+    let var = (sq / n - mean * mean).max(0.0);
+    libm::sqrt(var) >= SECTION_MIN_SPREAD_M as f64
 }
 
 /// The principal direction, in the plane normal to `nz`, of the points `keep` accepts (a lying patient's long axis).
@@ -793,6 +1007,119 @@ mod tests {
             .collect();
         let pd = Plane::through(Vector3::new(0.0, -0.3 * 0.766 / 0.643, -0.3), pd.normal());
         assert!(!rises_from_the_hinge(&pd, &deep, &mattress, &cfg));
+    }
+
+    /// A bed whose flat part returns no depth (a dark cover), its head section raised 40° from the hinge at world
+    /// y = 0 (0.9 m wide, 0.8 m long), the patient's legs a box 0.22 m high (0.36 x 0.65 m) on the flat part, the
+    /// arm's link a 0.4 x 0.4 m plate 0.45 m above the mattress, the floor around the bed; the camera and the true
+    /// section.
+    fn hidden_mattress_scene() -> (vec::Vec<u16>, Isometry3, Plane) {
+        let k = Intrinsics::KINECT_V1;
+        // From beyond the foot end, looking at the section.
+        let eye = Vector3::new(0.1, -1.5, 1.3);
+        let fwd = (Vector3::new(0.0, 0.3, 0.2) - eye).normalize();
+        let right = fwd.cross(&Vector3::z()).normalize();
+        let down = fwd.cross(&right);
+        let world_from_camera = Isometry3::from_parts(
+            Translation3::from(eye),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(
+                &[right, down, fwd],
+            ))),
+        );
+        let raise = 40f32.to_radians();
+        let section_n = Vector3::new(0.0, -libm::sinf(raise), libm::cosf(raise));
+        let mut depth = vec![0u16; PIXELS];
+        for v in 0..HEIGHT {
+            for u in 0..WIDTH {
+                let ray = world_from_camera.rotation * k.unproject(u as f32, v as f32, 1.0).coords;
+                let mut best = f32::INFINITY;
+                let mut hit = |n: Vector3, d: f32, inside: &dyn Fn(Vector3) -> bool| {
+                    let den = n.dot(&ray);
+                    if den.abs() > 1e-6 {
+                        let t = -(n.dot(&eye) + d) / den;
+                        let p = eye + ray * t;
+                        if t > 0.0 && t < best && inside(p) {
+                            best = t;
+                        }
+                    }
+                };
+                hit(Vector3::z(), -0.22, &|p| {
+                    p.x.abs() < 0.18 && (-0.7..-0.05).contains(&p.y)
+                });
+                hit(section_n, 0.0, &|p| {
+                    p.x.abs() < 0.45 && p.y >= 0.0 && p.y / libm::cosf(raise) < 0.8
+                });
+                hit(Vector3::z(), -0.45, &|p| {
+                    (0.3..0.7).contains(&p.x) && p.y.abs() < 0.2
+                });
+                hit(Vector3::z(), 0.55, &|p| p.x.abs() > 0.5 || p.y.abs() > 1.0);
+                if best.is_finite() {
+                    depth[v * WIDTH + u] = (best * 1000.0).round() as u16;
+                }
+            }
+        }
+        let camera_from_world = world_from_camera.inverse();
+        let section = Plane::through(Vector3::zeros(), section_n).transformed(&camera_from_world);
+        (depth, camera_from_world, section)
+    }
+
+    #[test]
+    fn a_hidden_mattress_is_placed_through_the_raised_sections_bottom() {
+        let (depth, camera_from_world, section) = hidden_mattress_scene();
+        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
+        let k = Intrinsics::KINECT_V1;
+        let up = camera_from_world.rotation * Vector3::z();
+        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        // Not the legs' top (0.22 m), the arm's plate (0.45 m) or the floor: the level plane through the hinge.
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
+        assert!(
+            bed.mattress.normal().dot(&mattress.normal()) > libm::cosf(0.5f32.to_radians())
+                && (bed.mattress.d - mattress.d).abs() < 0.02,
+            "mattress {:?} vs {mattress:?}",
+            bed.mattress
+        );
+        let found = bed.head_section.expect("the raised section");
+        assert!(found.normal().dot(&section.normal()) > libm::cosf(2f32.to_radians()));
+        // Along the bed: up the section, world y.
+        let along = camera_from_world.inverse().rotation
+            * (bed.volume.bed_from_camera.inverse().rotation * Vector3::y());
+        assert!(along.y > 0.99, "long axis {along:?}");
+    }
+
+    #[test]
+    fn a_section_spans_the_bed_and_a_tilted_body_part_does_not() {
+        let up = Vector3::z();
+        let (wide, pw) = plate(40.0, 0.0, 0.6);
+        let labels = vec![1u8; wide.len()];
+        assert!(spans_the_bed(&pw, &up, &wide, &labels, 1, &[]));
+        // A thigh or the chest: the same slope 0.3 m wide.
+        let narrow: vec::Vec<Point3> = wide.iter().copied().filter(|q| q.x.abs() < 0.15).collect();
+        assert!(!spans_the_bed(&pw, &up, &narrow, &labels[..narrow.len()], 1, &[]));
+        // Only the plane's own points count.
+        assert!(!spans_the_bed(&pw, &up, &wide, &labels, 2, &[]));
+        // Nor the strip of a level plane that its band takes in where the two cross (2 m of mattress along the
+        // narrow plate's foot): it is still narrow.
+        let mattress = [(Plane::through(Vector3::zeros(), up), 1)];
+        let mut standing = narrow.clone();
+        standing.extend((0..200).map(|i| Point3::new(-1.0 + i as f32 * 0.01, 0.0, 0.0)));
+        assert!(spans_the_bed(
+            &pw,
+            &up,
+            &standing,
+            &vec![1u8; standing.len()],
+            1,
+            &[]
+        ));
+        let standing_labels = vec![1u8; standing.len()];
+        assert!(!spans_the_bed(
+            &pw,
+            &up,
+            &standing,
+            &standing_labels,
+            1,
+            &mattress
+        ));
     }
 
     #[test]
