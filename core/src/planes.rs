@@ -600,7 +600,7 @@ fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32) -> f32
     for x in own() {
         hist[(((x - lo) / bin) as usize).min(BINS - 1)] += 1;
     }
-    let want = ((share * n as f32).ceil() as u32).max(1);
+    let want = (libm::ceilf(share * n as f32) as u32).max(1);
     let mut seen = 0;
     for (i, c) in hist.iter().enumerate() {
         seen += c;
