@@ -860,6 +860,19 @@ mod tests {
         scene_with(0.48, None)
     }
 
+    /// `world_from_camera` of a camera at `eye` looking at `target`, image rows down the world's z (z up).
+    fn looking_at(eye: Vector3, target: Vector3) -> Isometry3 {
+        let fwd = (target - eye).normalize();
+        let right = fwd.cross(&Vector3::z()).normalize();
+        let down = fwd.cross(&right);
+        Isometry3::from_parts(
+            Translation3::from(eye),
+            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(
+                &[right, down, fwd],
+            ))),
+        )
+    }
+
     /// [`scene`] with the mattress `half_width` metres to each side and, with `plate`, a 0.4 x 0.4 m horizontal
     /// plate that high above the mattress beside the box (where the robot arm's links would be).
     fn scene_with(half_width: f32, plate: Option<f32>) -> (vec::Vec<u16>, Isometry3, Plane, Plane) {
@@ -867,15 +880,7 @@ mod tests {
         // World: z up, mattress top z = 0, floor z = -0.55, bed along world y.
         let tilt = 25f32.to_radians();
         let eye = Vector3::new(0.0, -1.4 * libm::sinf(tilt), 1.4 * libm::cosf(tilt));
-        let fwd = (-eye).normalize();
-        let right = fwd.cross(&Vector3::z()).normalize();
-        let down = fwd.cross(&right);
-        let world_from_camera = Isometry3::from_parts(
-            Translation3::from(eye),
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(
-                &[right, down, fwd],
-            ))),
-        );
+        let world_from_camera = looking_at(eye, Vector3::zeros());
         let camera_from_world = world_from_camera.inverse();
         let mut depth = vec![0u16; PIXELS];
         for v in 0..HEIGHT {
@@ -1017,15 +1022,7 @@ mod tests {
         let k = Intrinsics::KINECT_V1;
         // From beyond the foot end, looking at the section.
         let eye = Vector3::new(0.1, -1.5, 1.3);
-        let fwd = (Vector3::new(0.0, 0.3, 0.2) - eye).normalize();
-        let right = fwd.cross(&Vector3::z()).normalize();
-        let down = fwd.cross(&right);
-        let world_from_camera = Isometry3::from_parts(
-            Translation3::from(eye),
-            UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(
-                &[right, down, fwd],
-            ))),
-        );
+        let world_from_camera = looking_at(eye, Vector3::new(0.0, 0.3, 0.2));
         let raise = 40f32.to_radians();
         let section_n = Vector3::new(0.0, -libm::sinf(raise), libm::cosf(raise));
         let mut depth = vec![0u16; PIXELS];
