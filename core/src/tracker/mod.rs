@@ -127,7 +127,7 @@ pub struct TrackerConfig {
     /// A lock refit waits for a tracked frame whose fit sees at least this share of the front-facing torso (0: the
     /// first good fits): a refit on a half-hidden torso fits the shape to what hides it. On the 22 validation
     /// sequences 0.5 took the torso error from 15.2 to 13.6 mm (val2; s619 33.0 -> 18.2) and moved no sequence up by
-    /// more than 0.5 mm (docs/tracking.md, "Lock refits on a visible torso").
+    /// more than 0.5 mm (docs/tracking.md, "The bed's head section, and lock refits on a visible torso").
     pub refit_min_visible: f32,
     /// The lock refits hold the torso's lowest point on the mattress ([`fit::fit_shape_on_bed`]; `None`, the
     /// default: free). The front surface alone cannot tell a thick patient from a thin one nearer the camera, and the
