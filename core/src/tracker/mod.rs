@@ -400,7 +400,9 @@ fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
     let hip = Point3::from(camera_from_torso.translation.vector);
     let h = bed.mattress.signed_distance(&hip);
     let chest = camera_from_torso.rotation * Vector3::z();
-    (-0.05..=MAX_HIP_HEIGHT_M).contains(&h) && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
+    (-0.05..=MAX_HIP_HEIGHT_M).contains(&h)
+        && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
+        && bed_search::along_the_bed(camera_from_torso, bed)
 }
 
 /// Whether two torso poses are the same within the confirmation tolerances.
