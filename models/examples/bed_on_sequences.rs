@@ -24,10 +24,16 @@ fn degrees_between(a: &Vector3<f32>, b: &Vector3<f32>) -> f32 {
     a.dot(b).abs().min(1.0).acos().to_degrees()
 }
 
-/// The `q` quantile of `v` (sorted in place).
-fn quantile(v: &mut [f32], q: f32) -> f32 {
-    v.sort_by(f32::total_cmp);
+/// The `q` quantile of `v`, sorted.
+fn quantile(v: &[f32], q: f32) -> f32 {
     v[((v.len() - 1) as f32 * q) as usize]
+}
+
+/// `f` of each point, sorted.
+fn sorted(points: &[Point3<f32>], f: impl Fn(&Point3<f32>) -> f32) -> Vec<f32> {
+    let mut v: Vec<f32> = points.iter().map(f).collect();
+    v.sort_by(f32::total_cmp);
+    v
 }
 
 /// One line per non-vertical labelled plane of `bed`'s search.
@@ -66,18 +72,19 @@ fn describe_planes(
             .iter()
             .filter(|p| raised && section_t.signed_distance(p).abs() < 0.02)
             .count();
-        let mut h_true: Vec<f32> = own.iter().map(|p| mattress_t.signed_distance(p)).collect();
+        let h_true = sorted(&own, |p| mattress_t.signed_distance(p));
         let level = normal.cross(up).try_normalize(1e-6).unwrap_or(Vector3::x());
-        let mut along: Vec<f32> = own.iter().map(|p| level.dot(&p.coords)).collect();
-        let spread = quantile(&mut along, 0.95) - quantile(&mut along, 0.05);
+        let along = sorted(&own, |p| level.dot(&p.coords));
+        let spread = quantile(&along, 0.95) - quantile(&along, 0.05);
         let mut line = format!(
-            "    plane {l}: {:5} pts, {:3.0}% on the true section, tilt {tilt:2.0} deg, bottom {:+.3} m above the true mattress, spread {spread:.2} m",
+            "    plane {l}: {:5} pts, {:3.0}% on the true section, tilt {tilt:2.0} deg, bottom {:+.3} m above the true \
+             mattress, spread {spread:.2} m",
             own.len(),
             100.0 * on_section as f32 / own.len() as f32,
-            quantile(&mut h_true, 0.01),
+            quantile(&h_true, 0.01),
         );
         if let Some(bed) = bed {
-            let mut h_found: Vec<f32> = own.iter().map(|p| bed.mattress.signed_distance(p)).collect();
+            let h_found = sorted(&own, |p| bed.mattress.signed_distance(p));
             let d = -normal.dot(&c);
             let hinge = pts
                 .iter()
@@ -86,7 +93,7 @@ fn describe_planes(
                 .count();
             line += &format!(
                 ", bottom {:+.3} above the found one, {hinge} band points at it",
-                quantile(&mut h_found, 0.01)
+                quantile(&h_found, 0.01)
             );
         }
         println!("{line}");

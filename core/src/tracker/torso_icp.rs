@@ -60,8 +60,9 @@ pub struct TorsoIcpConfig {
     pub occluded_below: f32,
     /// While occluded, the pose follows the frame's best fit when it passes the acquisition's floors, lies on the
     /// bed and is at most `follow_m`/`follow_rad` from the last pose; such a fit from the temporal start ends the
-    /// search over starts, and the state stays occluded (no shape refit, no reference support change). Otherwise the pose coasts where the last good fit left it, and a patient who
-    /// rolls or shifts while their own arms hide 70-85 % of the torso drifts out from under it. Off by default:
+    /// search over starts, and the state stays occluded (no shape refit, no reference support change). Otherwise the
+    /// pose coasts where the last good fit left it, and a patient who rolls or shifts while their own arms hide 70-85
+    /// % of the torso drifts out from under it. Off by default:
     /// with the true shape it cuts the validation torso error (14.1 -> 11.2 mm), with the estimated shape it is a
     /// wash (partial views of a wrong shape pull the pose as much as they correct it; `docs/tracking.md`).
     pub follow_occluded: bool,

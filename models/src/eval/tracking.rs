@@ -71,7 +71,7 @@ pub struct TrackingEvalArgs {
     #[arg(long)]
     pub lock_refits: Option<u8>,
     /// The tracker's `refit_min_visible`: a lock refit waits for a fit that sees this share of the torso.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_visible_share)]
     pub refit_min_visible: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
@@ -83,6 +83,13 @@ fn parse_budget_ms(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if v.is_finite() && (1.0..=60_000.0).contains(&v) => Ok(v),
         _ => Err(format!("`{s}` is not a budget in ms (1 to 60000)")),
+    }
+}
+
+fn parse_visible_share(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{s}` is not a share of the torso (0 to 1)")),
     }
 }
 
