@@ -301,7 +301,7 @@ pub fn estimate_bed(
     let found = &found[..count];
     // The floor: the farthest plane with a parallel one a bed's height nearer. Up is its normal, else the caller's,
     // else the largest plane's (a view in which the flat mattress dominates).
-    let floor = found
+    let mut floor = found
         .iter()
         .filter(|(f, _)| has_bed_above(f, found))
         .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
@@ -313,10 +313,12 @@ pub fn estimate_bed(
     };
     let cos_up = libm::cosf(HORIZONTAL_DEG.to_radians());
     // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
-    // in depth layers a few centimetres apart, which may be found as planes of their own).
+    // in depth layers a few centimetres apart, which may be found as planes of their own), and far enough from the
+    // camera for a patient lying on it to be seen (an arm link's flat top near the camera is not it).
     let chosen = found
         .iter()
         .filter(|(p, _)| p.normal().dot(&up) >= cos_up && floor.is_none_or(|(f, _)| bed_height(&f, p)))
+        .filter(|(p, _)| p.d >= MIN_MATTRESS_DISTANCE_M)
         .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
         .copied();
     // A patient on a raised head section can hide the whole mattress; then the flat top of an arm link, or the
@@ -338,7 +340,18 @@ pub fn estimate_bed(
         }
         (Some(m), None) => m,
         (None, Some(b)) => (b.level(points, labels), 0),
-        (None, None) => return Err(PlaneError::NoPlane),
+        // Only planes too near the camera for a patient on them to be seen lie a bed's height above the "floor":
+        // they are the arm's links, and there is no floor in view (a low view); the mattress is the farthest
+        // level plane.
+        (None, None) => {
+            floor = None;
+            found
+                .iter()
+                .filter(|(p, _)| p.normal().dot(&up) >= cos_up && p.d >= MIN_MATTRESS_DISTANCE_M)
+                .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
+                .copied()
+                .ok_or(PlaneError::NoPlane)?
+        }
     };
     let mattress_label = found
         .iter()
@@ -739,6 +752,11 @@ fn ransac(
 /// Height band above a plane in which a patient lying on it is seen, metres.
 const LYING_BAND_M: (f32, f32) = (0.03, 0.35);
 
+/// Nearest a mattress can lie to the camera, metres: a patient lying on it must be in the sensor's range. The arm's
+/// links a bed's height above the mattress lay 0.47-0.72 m from the camera on the sequences where they were taken
+/// for it; true mattresses lie 0.86-1.7 m away (the scene generator puts the camera 1.0-1.6 m above them).
+const MIN_MATTRESS_DISTANCE_M: f32 = DEPTH_RANGE_M.0 + LYING_BAND_M.1;
+
 /// How many of `points` lie in [`LYING_BAND_M`] above `plane`: a patient's worth on a mattress, little on a floor.
 fn lying_on(points: &[Point3], plane: &Plane) -> usize {
     points
@@ -1127,6 +1145,49 @@ mod tests {
         let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
         let (mut pts, mut lab) = scratch();
         let k = Intrinsics::KINECT_V1;
+        let up = camera_from_world.rotation * Vector3::z();
+        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        assert!(
+            (bed.mattress.d - mattress.d).abs() < 0.003,
+            "mattress {:?} vs {mattress:?}",
+            bed.mattress
+        );
+        assert_eq!(bed.floor, None);
+    }
+
+    #[test]
+    fn a_plate_too_near_the_camera_is_not_the_mattress_whatever_lies_on_it() {
+        // As above, but a sloping slab (the arm's upper links, rising toward the camera) 5-41 cm above the plate
+        // fills more of the image than the patient's box: by what lies on it the plate looks like the mattress and
+        // the mattress like the floor. A patient lying on the plate, 0.6 m from the camera, could not be seen.
+        let (mut depth, camera_from_world, mattress, _) = scene_with(3.0, Some(0.67));
+        let world_from_camera = camera_from_world.inverse();
+        let k = Intrinsics::KINECT_V1;
+        let eye = world_from_camera.translation.vector;
+        let mut slab_pixels = 0;
+        for v in 0..HEIGHT {
+            for u in 0..WIDTH {
+                let ray = world_from_camera.rotation * k.unproject(u as f32, v as f32, 1.0).coords;
+                // z = 0.72 + 0.26 (0.2 - y) / 0.8 over y in -0.9..0.2, x in -0.55..-0.15: rising toward the camera,
+                // a strip 0.4 m wide across its slope (not a bed-wide head section).
+                let slope = 0.26 / 0.8;
+                let denom = ray.z + slope * ray.y;
+                if denom.abs() < 1e-6 {
+                    continue;
+                }
+                let t = (0.72 + slope * (0.2 - eye.y) - eye.z) / denom;
+                let p = eye + ray * t;
+                let old = depth[v * WIDTH + u];
+                let on_slab = (-0.9..0.2).contains(&p.y) && (-0.55..-0.15).contains(&p.x);
+                if t > 0.0 && on_slab && (old == 0 || t * 1000.0 < old as f32) {
+                    depth[v * WIDTH + u] = (t * 1000.0).round() as u16;
+                    slab_pixels += 1;
+                }
+            }
+        }
+        assert!(slab_pixels > 15_000, "{slab_pixels}");
+        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
         let up = camera_from_world.rotation * Vector3::z();
         let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
         assert!(
