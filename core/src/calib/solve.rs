@@ -46,14 +46,21 @@ pub struct SolveOptions {
     pub trim_factor: f32,
     /// The second cut never goes below this, metres.
     pub trim_floor_m: f32,
+    /// A result whose own 1-sigma ([`Uncertainty`]) exceeds this many times what probe mapping needs
+    /// ([`WARN_SIGMA_TRANSLATION_M`], [`WARN_SIGMA_ROTATION_DEG`]) is refused ([`SolveError::TooUncertain`]): the
+    /// poses are too close together for the camera's distance, or they disagree. 1.5 was chosen on the 18
+    /// validation sequences at 6, 10 and 20 poses (docs/calibration.md): the three sets above it all missed the
+    /// limits (13.0 mm, 0.56°, 62 mm); at 1.0 a set within both (3.6 mm / 0.17°, 1-sigma 6.9 mm) would go too.
+    pub max_sigma_factor: f32,
 }
 
 impl SolveOptions {
-    /// The defaults without the RMS residual refusal: for a pass whose solve only has to improve the next pass's
-    /// prior, or to say how well its poses agree.
+    /// The defaults without the RMS residual and uncertainty refusals: for a pass whose solve only has to improve
+    /// the next pass's prior, or to say how well its poses agree.
     pub fn lenient() -> Self {
         SolveOptions {
             max_rms_residual_m: f32::INFINITY,
+            max_sigma_factor: f32::INFINITY,
             ..SolveOptions::default()
         }
     }
@@ -61,7 +68,7 @@ impl SolveOptions {
 
 impl Default for SolveOptions {
     /// 10 mm inlier threshold, 2000 hypotheses, at least 4 pairs, condition up to 30, 5 refinement rounds, RMS
-    /// residual up to 5 mm, axial weight 0.25 (per pose, the validation sequences' detections scatter about
+    /// residual up to 5 mm, 1-sigma up to 1.5 times the target, axial weight 0.25 (per pose, the validation sequences' detections scatter about
     /// 1.2 mm along the axis and 0.3 mm across it; with the arm's 0.5 mm on both, about twice the error along).
     fn default() -> Self {
         SolveOptions {
@@ -75,6 +82,7 @@ impl Default for SolveOptions {
             axial_weight: 0.25,
             trim_factor: 3.5,
             trim_floor_m: 0.004,
+            max_sigma_factor: 1.5,
         }
     }
 }
@@ -187,6 +195,15 @@ pub enum SolveError {
         /// The limit, metres.
         limit_m: f32,
     },
+    /// The result's own 1-sigma exceeds [`SolveOptions::max_sigma_factor`] times what probe mapping needs.
+    TooUncertain {
+        /// Its translation 1-sigma (camera origin), metres.
+        translation_sigma_m: f32,
+        /// Its rotation 1-sigma, degrees.
+        rotation_sigma_deg: f32,
+        /// The factor over [`WARN_SIGMA_TRANSLATION_M`] and [`WARN_SIGMA_ROTATION_DEG`] it was held to.
+        factor: f32,
+    },
     /// A point is NaN or infinite.
     NonFinite,
     /// The residual or inlier buffer is shorter than the pair list.
@@ -219,6 +236,21 @@ impl fmt::Display for SolveError {
                  collect again",
                 rms_m * 1000.0,
                 limit_m * 1000.0
+            ),
+            SolveError::TooUncertain {
+                translation_sigma_m,
+                rotation_sigma_deg,
+                factor,
+            } => write!(
+                f,
+                "the result's own uncertainty ({:.1} mm / {:.2} deg at 1 sigma) is more than {factor} times the \
+                 {:.0} mm / {} deg probe mapping needs: spread the poses wider across the bed and in height, or add \
+                 poses (if they are already spread, the pairs disagree: a wrong tip detection or arm \
+                 states out of step)",
+                translation_sigma_m * 1000.0,
+                rotation_sigma_deg,
+                WARN_SIGMA_TRANSLATION_M * 1000.0,
+                WARN_SIGMA_ROTATION_DEG,
             ),
             SolveError::NonFinite => f.write_str("a calibration point is not finite"),
             SolveError::BufferTooShort => f.write_str("residual buffer shorter than the pair list"),
@@ -511,6 +543,18 @@ pub fn solve_with_axes(
     )
     .unwrap_or(f32::INFINITY);
     let uncertainty = uncertainty(pairs, axes, &inliers[..n], &t, options.axial_weight);
+    if let Some(u) = uncertainty {
+        let f = options.max_sigma_factor;
+        if u.translation_sigma_m > f * WARN_SIGMA_TRANSLATION_M
+            || u.rotation_sigma_deg > f * WARN_SIGMA_ROTATION_DEG
+        {
+            return Err(SolveError::TooUncertain {
+                translation_sigma_m: u.translation_sigma_m,
+                rotation_sigma_deg: u.rotation_sigma_deg,
+                factor: f,
+            });
+        }
+    }
     Ok(Solution {
         robot_base_from_camera: t,
         inliers: k,
@@ -937,8 +981,10 @@ mod tests {
                     Vector3::new(normal(&mut rng, sd), normal(&mut rng, sd), normal(&mut rng, sd));
             }
             let (mut r, mut ok) = ([0.0; 10], [false; 10]);
+            // Without the refusal (2.5 mm gives 11 mm at 1 sigma here, beyond it): the flag itself is tested.
             let opts = SolveOptions {
                 inlier_threshold_m: 0.05,
+                max_sigma_factor: f32::INFINITY,
                 ..SolveOptions::default()
             };
             let s = solve(&pairs[..10], &opts, &mut r, &mut ok).unwrap();
@@ -975,6 +1021,45 @@ mod tests {
             "{wide:?}"
         );
         assert!(tight.nominal_rotation_sigma_deg > 5.0 * wide.nominal_rotation_sigma_deg);
+    }
+
+    #[test]
+    fn a_result_too_uncertain_for_probe_mapping_is_refused() {
+        let t = truth();
+        // The tight set of the test above (±4 cm at ~2 m from the camera) with 1 mm per pose: the pairs agree to a
+        // millimetre, but their geometry turns that into degrees. Spread as wide as the poses above, they solve.
+        let base = poses(10);
+        let c = base[..10].iter().fold(Vector3::zeros(), |s, p| s + p.coords) / 10.0;
+        let run = |scale: f32, opts: &SolveOptions| {
+            let pts: [Point3; 10] = core::array::from_fn(|i| Point3::from(c + (base[i].coords - c) * scale));
+            let mut pairs = pairs_for(&pts, &t);
+            let mut rng = SplitMix(11);
+            for p in pairs.iter_mut().take(10) {
+                p.robot_base += Vector3::new(
+                    normal(&mut rng, 0.001),
+                    normal(&mut rng, 0.001),
+                    normal(&mut rng, 0.001),
+                );
+            }
+            let (mut r, mut ok) = ([0.0; 10], [false; 10]);
+            solve(&pairs[..10], opts, &mut r, &mut ok)
+        };
+        let wide = run(1.0, &SolveOptions::default()).unwrap();
+        assert!(!wide.uncertainty.unwrap().beyond_target(), "{wide:?}");
+        match run(0.13, &SolveOptions::default()) {
+            Err(SolveError::TooUncertain {
+                translation_sigma_m,
+                rotation_sigma_deg,
+                factor,
+            }) => assert!(
+                translation_sigma_m > factor * WARN_SIGMA_TRANSLATION_M
+                    || rotation_sigma_deg > factor * WARN_SIGMA_ROTATION_DEG
+            ),
+            other => panic!("{other:?}"),
+        }
+        // A pass that only improves the next pass's prior still gets its solve.
+        let loose = run(0.13, &SolveOptions::lenient()).unwrap();
+        assert!(loose.uncertainty.unwrap().beyond_target());
     }
 
     #[test]
