@@ -68,8 +68,9 @@ impl SolveOptions {
 
 impl Default for SolveOptions {
     /// 10 mm inlier threshold, 2000 hypotheses, at least 4 pairs, condition up to 30, 5 refinement rounds, RMS
-    /// residual up to 5 mm, 1-sigma up to 1.5 times the target, axial weight 0.25 (per pose, the validation sequences' detections scatter about
-    /// 1.2 mm along the axis and 0.3 mm across it; with the arm's 0.5 mm on both, about twice the error along).
+    /// residual up to 5 mm, 1-sigma up to 1.5 times the target, axial weight 0.25 (per pose, the validation
+    /// sequences' detections scatter about 1.2 mm along the axis and 0.3 mm across it; with the arm's 0.5 mm on
+    /// both, about twice the error along).
     fn default() -> Self {
         SolveOptions {
             inlier_threshold_m: 0.010,
