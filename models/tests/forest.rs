@@ -38,6 +38,7 @@ fn dataset() -> &'static PathBuf {
             previews: 0,
             noise: KinectNoise::default(),
             view_distance_scale: 1.0,
+            crop_margin_px: supine_models::dataset::CROP_MARGIN_PX as u16,
         };
         generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
         dir
@@ -256,4 +257,29 @@ fn evaluation_reports_every_method() {
         }
         assert!(json[m]["with_arm"].is_object() && json[m]["without_arm"].is_object());
     }
+}
+
+#[test]
+fn the_file_asks_for_the_inference_sample_count_not_the_training_one() {
+    // Trees grow on more samples per image than a frame's inference draws (the committed forest: 2048 and 512);
+    // the file carries the inference count, and a count the head computer cannot draw is refused.
+    let ds = Dataset::open(dataset()).unwrap();
+    let cfg = TrainConfig {
+        samples_per_image: 2048,
+        infer_samples: 128,
+        refine: RefineParams {
+            epochs: 1,
+            ..RefineParams::default()
+        },
+        ..tiny()
+    };
+    let (forest, _) = train(&ds, &cfg, false).unwrap();
+    let bytes = forest.to_file_bytes("{}").unwrap();
+    assert_eq!(ForestView::parse(&bytes).unwrap().samples_per_frame(), 128);
+    let too_many = TrainConfig {
+        infer_samples: MAX_SAMPLES + 1,
+        ..cfg.clone()
+    };
+    let err = train(&ds, &too_many, false).unwrap_err().to_string();
+    assert!(err.contains("--infer-samples"), "{err}");
 }

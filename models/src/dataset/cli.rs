@@ -56,6 +56,10 @@ pub struct DatasetArgs {
     /// Scale of the head's distance to the patient (1 = 1.1–2 m; 1.4 reaches the real frames' 1.5–2.8 m).
     #[arg(long, default_value_t = 1.0)]
     pub view_distance_scale: f32,
+    /// Margin around the patient's bounding box in the stored crops, px (640: whole frames). The joint forest's
+    /// probes reach ±offset/depth px; a probe beyond the crop reads no depth where the head computer sees bed.
+    #[arg(long, default_value_t = crate::dataset::CROP_MARGIN_PX as u16)]
+    pub crop_margin: u16,
     /// Replace an existing dataset in DIR.
     #[arg(long)]
     pub force: bool,
@@ -147,6 +151,7 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
             KinectNoise::default()
         },
         view_distance_scale: args.view_distance_scale,
+        crop_margin_px: args.crop_margin,
     };
     let total = args.bodies as u64 * args.views as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());

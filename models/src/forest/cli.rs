@@ -192,9 +192,18 @@ pub struct TrainJointsArgs {
     /// Fewest samples a node needs to split.
     #[arg(long, default_value_t = 50)]
     pub min_split: usize,
-    /// Samples per image.
+    /// Training samples per image.
     #[arg(long, default_value_t = 512)]
     pub samples: usize,
+    /// Samples per frame the trained forest asks for at inference (stored in the file) [default: --samples].
+    #[arg(long)]
+    pub infer_samples: Option<usize>,
+    /// Probe offsets are drawn within ±this many pixel·metres (px at 1 m; at most 127, the file's i8).
+    #[arg(long, default_value_t = 50)]
+    pub offset_px_m: i32,
+    /// Split thresholds are drawn within ±this many millimetres (at most 127, the file's i8).
+    #[arg(long, default_value_t = 50)]
+    pub threshold_mm: i32,
     /// Most fitting images each tree is grown on (bounds memory for large datasets).
     #[arg(long, default_value_t = 800)]
     pub tree_images: usize,
@@ -306,6 +315,15 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "--samples, --depth and --candidates must be positive"
     );
     ensure!(
+        (1..=supine_core::forest::feature::MAX_OFFSET).contains(&a.offset_px_m),
+        "--offset-px-m must be in 1..={}",
+        supine_core::forest::feature::MAX_OFFSET
+    );
+    ensure!(
+        (1..=i32::from(i8::MAX)).contains(&a.threshold_mm),
+        "--threshold-mm must be in 1..=127 (the model file stores thresholds as i8 mm)"
+    );
+    ensure!(
         a.lambda1 > 0.0 && a.lambda2 >= 0.0 && a.l2 >= 0.0 && a.lr > 0.0 && (0.0..1.0).contains(&a.momentum),
         "refinement parameters out of range"
     );
@@ -326,8 +344,10 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
             max_depth: a.depth,
             candidates: a.candidates,
             min_split: a.min_split.max(2),
-            ..TreeParams::default()
+            offset_px_m: a.offset_px_m,
+            threshold_mm: a.threshold_mm,
         },
+        infer_samples: a.infer_samples.unwrap_or(0),
         tree_images: a.tree_images.max(1),
         validation_fraction: a.validation_fraction,
         refine: RefineParams {

@@ -43,8 +43,11 @@ pub struct TrainConfig {
     pub seed: u64,
     /// Trees.
     pub trees: usize,
-    /// Samples per image.
+    /// Training samples per image.
     pub samples_per_image: usize,
+    /// Samples per frame the forest asks for at inference (validation choices and the file; 0: `samples_per_image`).
+    #[serde(default)]
+    pub infer_samples: usize,
     /// Tree growing.
     pub tree: TreeParams,
     /// Most fitting images each tree is grown on (a random subset).
@@ -61,12 +64,27 @@ pub struct TrainConfig {
     pub refine: RefineParams,
 }
 
+/// Most training samples per image (memory: 40 B per sample while training).
+pub const MAX_TRAIN_SAMPLES: usize = 8192;
+
+impl TrainConfig {
+    /// Samples per frame at inference.
+    pub fn infer_samples(&self) -> usize {
+        if self.infer_samples == 0 {
+            self.samples_per_image
+        } else {
+            self.infer_samples
+        }
+    }
+}
+
 impl Default for TrainConfig {
     fn default() -> Self {
         TrainConfig {
             seed: 0,
             trees: 3,
             samples_per_image: 512,
+            infer_samples: 0,
             tree: TreeParams::default(),
             tree_images: 800,
             validation_fraction: 0.15,
@@ -171,13 +189,16 @@ fn validation_error(
     method: Method,
     data: &ImageSamples<'_>,
     imgs: &[usize],
+    n: usize,
 ) -> [f32; P] {
     let per: Vec<[f32; P]> = imgs
         .par_iter()
         .map_init(
             || vec![Vote::default(); MAX_VOTES],
             |votes, &img| {
+                // The first `n` of the image's uniform draws: as many as inference reads.
                 let (lo, hi) = data.ranges[img];
+                let hi = hi.min(lo + n);
                 let pos: Vec<[f32; 3]> = data.samples[lo..hi].iter().map(|s| s.px.p).collect();
                 let est = estimate_from_leaves(forest, method, &pos, &data.leaves[lo..hi], &[None; P], votes);
                 let t = &data.infos[img].targets;
@@ -227,8 +248,12 @@ pub fn train_on(
         "--trees must be 1..={MAX_TREES}"
     );
     ensure!(
-        (1..=supine_core::forest::MAX_SAMPLES).contains(&cfg.samples_per_image),
-        "samples per image must be 1..={}",
+        (1..=MAX_TRAIN_SAMPLES).contains(&cfg.samples_per_image),
+        "training samples per image must be 1..={MAX_TRAIN_SAMPLES}"
+    );
+    ensure!(
+        (1..=supine_core::forest::MAX_SAMPLES).contains(&cfg.infer_samples()),
+        "inference samples per frame (--infer-samples, default --samples) must be 1..={}",
         supine_core::forest::MAX_SAMPLES
     );
     ensure!(!ds.train.is_empty(), "the dataset has no training bodies");
@@ -478,7 +503,7 @@ pub fn train_on(
         baseline: stats.baseline,
         error_scale_m: [0.1; P],
         params: [default_params; P],
-        samples: cfg.samples_per_image as u32,
+        samples: cfg.infer_samples() as u32,
     };
     // Per point, the (E_l scale, bandwidth) pair with the best validation score: a point's estimate depends only on
     // its own confidences and bandwidth, so the choices are independent across points.
@@ -494,7 +519,7 @@ pub fn train_on(
                 baseline_bandwidth_m: h,
                 vote_length_m: cfg.vote_length_m,
             }; P];
-            let er = validation_error(&forest, Method::Refined, &data, tune_imgs);
+            let er = validation_error(&forest, Method::Refined, &data, tune_imgs, cfg.infer_samples());
             for p in 0..P {
                 best_here[p] = best_here[p].min(er[p]);
                 if er[p] < best_r[p].0 {
@@ -512,7 +537,7 @@ pub fn train_on(
             baseline_bandwidth_m: h,
             vote_length_m: cfg.vote_length_m,
         }; P];
-        let eb = validation_error(&forest, Method::Baseline, &data, tune_imgs);
+        let eb = validation_error(&forest, Method::Baseline, &data, tune_imgs, cfg.infer_samples());
         for p in 0..P {
             if eb[p] < best_b[p].0 {
                 best_b[p] = (eb[p], h);
