@@ -794,9 +794,9 @@ mod tests {
 
     #[test]
     fn a_wider_crop_margin_keeps_more_of_the_same_scene() {
-        // Whole frames (`--crop-margin 640`): the same scene, views and truth, every label a narrow crop holds
-        // at the same place. The noise is drawn over the stored region, so its realisation (not
-        // its model) differs. The manifest records a margin other than the default.
+        // Whole frames (`--crop-margin 640`): the same scene, views and truth, every label a narrow crop holds at
+        // the same place. The noise is drawn over the stored region, so its realisation (not its model) differs.
+        // The manifest records a margin other than the default.
         let dir =
             |name: &str| std::env::temp_dir().join(format!("supine-crop-{name}-{}", std::process::id()));
         let (narrow, wide) = (dir("narrow"), dir("wide"));
