@@ -46,7 +46,7 @@ fn bench(c: &mut Criterion) {
         previews: 0,
         noise: KinectNoise::default(),
         view_distance_scale: 1.0,
-        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX as u16,
+        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
     };
     let source = open_source(BodyKind::Model, None).or_else(|_| open_source(BodyKind::Mannequin, None));
     generate(source.expect("a body source").as_ref(), &cfg, &dir, &|| {}).expect("bench views");

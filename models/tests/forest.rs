@@ -38,7 +38,7 @@ fn dataset() -> &'static PathBuf {
             previews: 0,
             noise: KinectNoise::default(),
             view_distance_scale: 1.0,
-            crop_margin_px: supine_models::dataset::CROP_MARGIN_PX as u16,
+            crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
         };
         generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
         dir
@@ -266,7 +266,7 @@ fn the_file_asks_for_the_inference_sample_count_not_the_training_one() {
     let ds = Dataset::open(dataset()).unwrap();
     let cfg = TrainConfig {
         samples_per_image: 2048,
-        infer_samples: 128,
+        infer_samples: Some(128),
         refine: RefineParams {
             epochs: 1,
             ..RefineParams::default()
@@ -277,7 +277,7 @@ fn the_file_asks_for_the_inference_sample_count_not_the_training_one() {
     let bytes = forest.to_file_bytes("{}").unwrap();
     assert_eq!(ForestView::parse(&bytes).unwrap().samples_per_frame(), 128);
     let too_many = TrainConfig {
-        infer_samples: MAX_SAMPLES + 1,
+        infer_samples: Some(MAX_SAMPLES + 1),
         ..cfg.clone()
     };
     let err = train(&ds, &too_many, false).unwrap_err().to_string();

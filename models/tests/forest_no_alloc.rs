@@ -33,7 +33,7 @@ fn inference_allocates_nothing() {
         previews: 0,
         noise: KinectNoise::default(),
         view_distance_scale: 1.0,
-        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX as u16,
+        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
     };
     generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
     let ds = Dataset::open(&dir).unwrap();

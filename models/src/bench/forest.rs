@@ -130,7 +130,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
         previews: 0,
         noise: KinectNoise::default(),
         view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX as u16,
+        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
     };
     let source = open_source(BodyKind::Model, None)?;
     let t_gen = Instant::now();

@@ -223,7 +223,7 @@ pub fn run(cfg: &ProblemConfig, stop: &StopRule, out: &Path, progress: bool) -> 
         previews: 0,
         noise: KinectNoise::default(),
         view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX as u16,
+        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
     };
     generate_dataset(source.as_ref(), &dcfg, &dir, &|| {})?;
     let ds = Dataset::open(&dir)?;

@@ -58,7 +58,7 @@ pub struct DatasetArgs {
     pub view_distance_scale: f32,
     /// Margin around the patient's bounding box in the stored crops, px (640: whole frames). The joint forest's
     /// probes reach ±offset/depth px; a probe beyond the crop reads no depth where the head computer sees bed.
-    #[arg(long, default_value_t = crate::dataset::CROP_MARGIN_PX as u16)]
+    #[arg(long, default_value_t = crate::dataset::CROP_MARGIN_PX)]
     pub crop_margin: u16,
     /// Replace an existing dataset in DIR.
     #[arg(long)]

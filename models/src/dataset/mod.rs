@@ -80,11 +80,11 @@ pub struct DatasetConfig {
 }
 
 fn default_crop_margin() -> u16 {
-    CROP_MARGIN_PX as u16
+    CROP_MARGIN_PX
 }
 
 fn is_default_crop_margin(x: &u16) -> bool {
-    *x == CROP_MARGIN_PX as u16
+    *x == CROP_MARGIN_PX
 }
 
 fn one() -> f32 {
@@ -205,7 +205,7 @@ impl Worker {
 /// Default margin around the patient's bounding box in the stored crop: covers the paper's ±50 px·m probe offsets
 /// (scaled by 1/depth, ≤ 40 px beyond 1.25 m) so every probe reads real bed or arm depth, not the crop border. Wider
 /// probes need a wider margin (`dataset --crop-margin`).
-pub const CROP_MARGIN_PX: usize = 48;
+pub const CROP_MARGIN_PX: u16 = 48;
 
 /// Bounding box of the patient's pixels (label body) plus `margin`, clamped to the image: the region of interest
 /// the trainers read. Bed, floor and arm inside it are kept; outside it nothing is stored.
@@ -632,7 +632,7 @@ mod tests {
             previews: 1,
             noise: KinectNoise::default(),
             view_distance_scale: 1.0,
-            crop_margin_px: CROP_MARGIN_PX as u16,
+            crop_margin_px: CROP_MARGIN_PX,
         }
     }
 

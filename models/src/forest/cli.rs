@@ -315,15 +315,6 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "--samples, --depth and --candidates must be positive"
     );
     ensure!(
-        (1..=supine_core::forest::feature::MAX_OFFSET).contains(&a.offset_px_m),
-        "--offset-px-m must be in 1..={}",
-        supine_core::forest::feature::MAX_OFFSET
-    );
-    ensure!(
-        (1..=i32::from(i8::MAX)).contains(&a.threshold_mm),
-        "--threshold-mm must be in 1..=127 (the model file stores thresholds as i8 mm)"
-    );
-    ensure!(
         a.lambda1 > 0.0 && a.lambda2 >= 0.0 && a.l2 >= 0.0 && a.lr > 0.0 && (0.0..1.0).contains(&a.momentum),
         "refinement parameters out of range"
     );
@@ -347,7 +338,7 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
             offset_px_m: a.offset_px_m,
             threshold_mm: a.threshold_mm,
         },
-        infer_samples: a.infer_samples.unwrap_or(0),
+        infer_samples: a.infer_samples,
         tree_images: a.tree_images.max(1),
         validation_fraction: a.validation_fraction,
         refine: RefineParams {

@@ -45,9 +45,10 @@ pub struct TrainConfig {
     pub trees: usize,
     /// Training samples per image.
     pub samples_per_image: usize,
-    /// Samples per frame the forest asks for at inference (validation choices and the file; 0: `samples_per_image`).
+    /// Samples per frame the forest asks for at inference (validation choices and the file; `None`:
+    /// `samples_per_image`).
     #[serde(default)]
-    pub infer_samples: usize,
+    pub infer_samples: Option<usize>,
     /// Tree growing.
     pub tree: TreeParams,
     /// Most fitting images each tree is grown on (a random subset).
@@ -70,11 +71,7 @@ pub const MAX_TRAIN_SAMPLES: usize = 8192;
 impl TrainConfig {
     /// Samples per frame at inference.
     pub fn infer_samples(&self) -> usize {
-        if self.infer_samples == 0 {
-            self.samples_per_image
-        } else {
-            self.infer_samples
-        }
+        self.infer_samples.unwrap_or(self.samples_per_image)
     }
 }
 
@@ -84,7 +81,7 @@ impl Default for TrainConfig {
             seed: 0,
             trees: 3,
             samples_per_image: 512,
-            infer_samples: 0,
+            infer_samples: None,
             tree: TreeParams::default(),
             tree_images: 800,
             validation_fraction: 0.15,
@@ -255,6 +252,15 @@ pub fn train_on(
         (1..=supine_core::forest::MAX_SAMPLES).contains(&cfg.infer_samples()),
         "inference samples per frame (--infer-samples, default --samples) must be 1..={}",
         supine_core::forest::MAX_SAMPLES
+    );
+    ensure!(
+        (1..=supine_core::forest::feature::MAX_OFFSET).contains(&cfg.tree.offset_px_m),
+        "--offset-px-m must be in 1..={}",
+        supine_core::forest::feature::MAX_OFFSET
+    );
+    ensure!(
+        (1..=i32::from(i8::MAX)).contains(&cfg.tree.threshold_mm),
+        "--threshold-mm must be in 1..=127 (the model file stores thresholds as i8 mm)"
     );
     ensure!(!ds.train.is_empty(), "the dataset has no training bodies");
     let k = Intrinsics::KINECT_V1;

@@ -126,7 +126,7 @@ pub fn small_dataset(dir: &std::path::Path, bodies: u32, views: u16, seed: u64) 
         previews: 0,
         noise: KinectNoise::default(),
         view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX as u16,
+        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
     };
     let source = crate::scene::model_body::ModelBodySource::load(None)?;
     generate(&source, &cfg, dir, &|| {})?;
