@@ -4,6 +4,7 @@
 
 use std::path::PathBuf;
 use std::sync::OnceLock;
+use supine_core::body_model::BodyPart;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estimate, estimate_from_leaves};
@@ -15,7 +16,7 @@ use supine_core::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES};
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 use supine_models::dataset::{Dataset, DatasetConfig, generate};
-use supine_models::forest::data::{clip_for, view_planes};
+use supine_models::forest::data::{CLASS_ARM, TrainImage, clip_for, view_planes};
 use supine_models::forest::eval::{Candidate, evaluate};
 use supine_models::forest::refine::RefineParams;
 use supine_models::forest::sidecar::{self, FloatLeaves};
@@ -244,7 +245,7 @@ fn evaluation_reports_every_method() {
             method: Method::Refined,
         },
     ];
-    let (table, images) = evaluate(&ds, &cands, 0, 256, false).unwrap();
+    let (table, images) = evaluate(&ds, &cands, 0, 256, 0.6, false).unwrap();
     assert_eq!(images, ds.test.len() * 2);
     let json = supine_models::forest::eval::methods_json(&cands, &table);
     for m in ["baseline", "refined", "quantised"] {
@@ -282,4 +283,50 @@ fn the_file_asks_for_the_inference_sample_count_not_the_training_one() {
     };
     let err = train(&ds, &too_many, false).unwrap_err().to_string();
     assert!(err.contains("--infer-samples"), "{err}");
+}
+
+#[test]
+fn training_views_are_read_through_the_trackers_ceiling() {
+    // What the trainer reads equals what the tracker's forest reads: depth more than the ceiling above both bed
+    // planes is no depth, everything under it is untouched, the patient's trunk is never cut, the arm is.
+    let k = Intrinsics::KINECT_V1;
+    let ds = Dataset::open(dataset()).unwrap();
+    let ceiling = supine_core::tracker::FOREST_CEILING_M;
+    let (mut cut_arm, mut arm_views) = (0usize, 0usize);
+    for &b in ds.train.iter().chain(&ds.test) {
+        for v in &ds.read_body(b).unwrap().views {
+            let raw = TrainImage::from_view(v, &k, 0.0);
+            let read = TrainImage::from_view(v, &k, ceiling);
+            assert_eq!(raw.depth, v.depth_mm, "0 m: the view as rendered");
+            let planes = view_planes(&v.truth);
+            arm_views += v.truth.probe.is_some() as usize;
+            for (i, (&d, &r)) in raw.depth.iter().zip(&read.depth).enumerate() {
+                let (x, y) = (
+                    v.crop.x0 as usize + i % v.crop.w as usize,
+                    v.crop.y0 as usize + i / v.crop.w as usize,
+                );
+                let p = k.unproject(x as f32, y as f32, d as f32 * 1e-3);
+                let above = planes.iter().all(|pl| pl.signed_distance(&p) > ceiling + 1e-4);
+                let below = planes.iter().any(|pl| pl.signed_distance(&p) < ceiling - 1e-4);
+                if d == 0 || below {
+                    assert_eq!(r, d, "pixel ({x}, {y}) under the ceiling is kept");
+                } else if above {
+                    assert_eq!(r, 0, "pixel ({x}, {y}) over the ceiling reads no depth");
+                }
+                let class = raw.class[i];
+                if r != d {
+                    // A raised hand may rise over it; the trunk and head, which carry the salient points, never.
+                    assert!(
+                        class > BodyPart::Pelvis as u8,
+                        "a trunk pixel was cut at ({x}, {y}): {d} mm, class {class}"
+                    );
+                    cut_arm += (class == CLASS_ARM) as usize;
+                }
+            }
+        }
+    }
+    assert!(
+        arm_views > 0 && cut_arm > 0,
+        "the arm rises over the ceiling in {arm_views} arm views: {cut_arm} px cut"
+    );
 }

@@ -172,7 +172,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
     for &b in &fit {
         let rec = ds.read_body(b)?;
         for v in &rec.views {
-            let img = TrainImage::from_view(v);
+            let img = TrainImage::from_view(v, &k, tcfg.ceiling_m);
             let planes = view_planes(&v.truth);
             let clip = clip_for(&planes, &k);
             let mut px = vec![SamplePixel::default(); cfg.samples];

@@ -207,6 +207,10 @@ pub struct TrainJointsArgs {
     /// Most fitting images each tree is grown on (bounds memory for large datasets).
     #[arg(long, default_value_t = 800)]
     pub tree_images: usize,
+    /// Read the training views through the tracker's height ceiling: depth more than this many metres above the
+    /// bed planes is no depth, as the tracker's forest reads it (0: the views as rendered).
+    #[arg(long, default_value_t = supine_core::tracker::FOREST_CEILING_M)]
+    pub ceiling_m: f32,
     /// Refinement epochs.
     #[arg(long, default_value_t = 48)]
     pub epochs: usize,
@@ -257,6 +261,9 @@ pub struct EvalJointsArgs {
     /// Samples per view [default: what the forest was trained with].
     #[arg(long)]
     pub samples: Option<usize>,
+    /// Read the test views through the tracker's height ceiling over the bed planes, metres (0: as rendered).
+    #[arg(long, default_value_t = supine_core::tracker::FOREST_CEILING_M)]
+    pub ceiling_m: f32,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -351,6 +358,7 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
             ..RefineParams::default()
         },
         vote_length_m: a.vote_length,
+        ceiling_m: a.ceiling_m,
         ..TrainConfig::default()
     };
     let structure = match &a.structure {
@@ -526,7 +534,12 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
         model: &view,
         method: Method::Refined,
     });
-    let (table, images) = pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, true))?;
+    ensure!(
+        (0.0..=10.0).contains(&a.ceiling_m),
+        "--ceiling-m must be in [0, 10] m"
+    );
+    let (table, images) =
+        pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, a.ceiling_m, true))?;
     print!("{}", text_table(&cands, &table));
     let mut report = methods_json(&cands, &table);
     let commit = commit();
@@ -537,6 +550,7 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
     report.insert("model".into(), json!(path.display().to_string()));
     report.insert("float_leaves".into(), json!(float.is_some()));
     report.insert("samples_per_view".into(), json!(samples));
+    report.insert("ceiling_m".into(), json!(a.ceiling_m));
     report.insert("test_bodies".into(), json!(ds.test.len()));
     report.insert(
         "dataset".into(),

@@ -1,6 +1,9 @@
 //! Training data of the joint forest: one dataset view as the trainer holds it ([`TrainImage`]: the stored crop's
 //! depth and per-pixel class), the clip the tracker would apply (the view's ground-truth bed planes), and the
-//! sampled pixels with their targets. One image costs its crop (~2 x w x h bytes) while it is held.
+//! sampled pixels with their targets. One image costs its crop (~2 x w x h bytes) while it is held. The trainer
+//! reads each view as the tracker reads its frames: with the height ceiling over the bed planes
+//! ([`supine_core::forest::sample::Ceiling`]), so the arm's links high above the patient are no depth in
+//! training as they are in the product.
 
 use crate::dataset::ViewTruth;
 use crate::dataset::format::ViewRecord;
@@ -9,7 +12,7 @@ use crate::render::{Label, NO_PART};
 use supine_core::body_model::BodyPart;
 use supine_core::camera::Intrinsics;
 use supine_core::forest::feature::DepthImage;
-use supine_core::forest::sample::{Clip, PixelRect, SamplePixel, sample_pixels};
+use supine_core::forest::sample::{Ceiling, Clip, PixelRect, SamplePixel, sample_pixels};
 use supine_core::geometry::Plane;
 use supine_core::salient::SalientPoint;
 
@@ -56,8 +59,9 @@ pub struct TrainImage {
 }
 
 impl TrainImage {
-    /// From a decoded view.
-    pub fn from_view(v: &ViewRecord) -> TrainImage {
+    /// From a decoded view, read through the tracker's height ceiling of `ceiling_m` over the view's bed planes
+    /// (0: the view as rendered).
+    pub fn from_view(v: &ViewRecord, k: &Intrinsics, ceiling_m: f32) -> TrainImage {
         let class = v
             .label
             .iter()
@@ -68,11 +72,21 @@ impl TrainImage {
                 _ => CLASS_OTHER,
             })
             .collect();
-        TrainImage {
+        let mut img = TrainImage {
             crop: v.crop,
             depth: v.depth_mm.clone(),
             class,
+        };
+        if ceiling_m > 0.0 {
+            let planes = view_planes(&v.truth);
+            let ceiling = Ceiling::new(&img, k, &planes, ceiling_m);
+            let (x0, y0, w) = (img.crop.x0 as i32, img.crop.y0 as i32, img.crop.w.max(1) as usize);
+            let depth = (0..img.depth.len())
+                .map(|i| ceiling.depth_at(x0 + (i % w) as i32, y0 + (i / w) as i32))
+                .collect();
+            img.depth = depth;
         }
+        img
     }
 
     /// Class at full-image pixel (x, y).

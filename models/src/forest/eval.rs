@@ -14,6 +14,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
 use supine_core::forest::model::ForestModel;
+use supine_core::forest::sample::Ceiling;
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 
@@ -98,6 +99,7 @@ pub fn evaluate(
     cands: &[Candidate<'_>],
     seed: u64,
     samples: usize,
+    ceiling_m: f32,
     progress: bool,
 ) -> Result<(Table, usize)> {
     ensure!(!ds.test.is_empty(), "the dataset has no test bodies");
@@ -143,7 +145,12 @@ pub fn evaluate(
                                 seed: image_seed(seed, body, v.truth.view),
                                 method: c.method,
                             };
-                            let est = estimate(c.model, &frame, &k, &clip, &cfg, &[None; P], ws);
+                            let est = if ceiling_m > 0.0 {
+                                let img = Ceiling::new(&frame, &k, &planes, ceiling_m);
+                                estimate(c.model, &img, &k, &clip, &cfg, &[None; P], ws)
+                            } else {
+                                estimate(c.model, &frame, &k, &clip, &cfg, &[None; P], ws)
+                            };
                             for p in 0..P {
                                 let e = est[p].map(|x| {
                                     (x.position.coords - nalgebra::Vector3::from(v.truth.salient_camera[p]))

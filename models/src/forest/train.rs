@@ -63,6 +63,10 @@ pub struct TrainConfig {
     pub leaf_bandwidth_m: f32,
     /// Refinement.
     pub refine: RefineParams,
+    /// Training views are read through the tracker's height ceiling of this many metres over the bed planes (0:
+    /// as rendered; files trained before it existed read as 0).
+    #[serde(default)]
+    pub ceiling_m: f32,
 }
 
 /// Most training samples per image (memory: 40 B per sample while training).
@@ -89,6 +93,7 @@ impl Default for TrainConfig {
             reservoir: 32,
             leaf_bandwidth_m: 0.05,
             refine: RefineParams::default(),
+            ceiling_m: supine_core::tracker::FOREST_CEILING_M,
         }
     }
 }
@@ -254,6 +259,10 @@ pub fn train_on(
         supine_core::forest::MAX_SAMPLES
     );
     ensure!(
+        (0.0..=10.0).contains(&cfg.ceiling_m),
+        "--ceiling-m must be in [0, 10] m"
+    );
+    ensure!(
         (1..=supine_core::forest::feature::MAX_OFFSET).contains(&cfg.tree.offset_px_m),
         "--offset-px-m must be in 1..={}",
         supine_core::forest::feature::MAX_OFFSET
@@ -311,7 +320,7 @@ pub fn train_on(
         );
         for v in &rec.views {
             let img_id = infos.len();
-            let ti = TrainImage::from_view(v);
+            let ti = TrainImage::from_view(v, &k, cfg.ceiling_m);
             let lo = samples.len();
             sample_image(
                 &ti,
@@ -435,7 +444,7 @@ pub fn train_on(
             .enumerate()
             .map(|(v, view)| {
                 let (lo, hi) = ranges[first + v];
-                let ti = TrainImage::from_view(view);
+                let ti = TrainImage::from_view(view, &k, cfg.ceiling_m);
                 let mut out = vec![[0u32; MAX_TREES]; hi - lo];
                 drop_down(&ti, lo, hi, &mut out);
                 (lo, hi, out)
