@@ -245,7 +245,8 @@ fn evaluation_reports_every_method() {
             method: Method::Refined,
         },
     ];
-    let (table, images) = evaluate(&ds, &cands, 0, 256, 0.6, false).unwrap();
+    let (table, images) =
+        evaluate(&ds, &cands, 0, 256, supine_core::tracker::FOREST_CEILING_M, false).unwrap();
     assert_eq!(images, ds.test.len() * 2);
     let json = supine_models::forest::eval::methods_json(&cands, &table);
     for m in ["baseline", "refined", "quantised"] {

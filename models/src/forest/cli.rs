@@ -534,10 +534,7 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
         model: &view,
         method: Method::Refined,
     });
-    ensure!(
-        (0.0..=10.0).contains(&a.ceiling_m),
-        "--ceiling-m must be in [0, 10] m"
-    );
+    super::data::check_ceiling(a.ceiling_m)?;
     let (table, images) =
         pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, a.ceiling_m, true))?;
     print!("{}", text_table(&cands, &table));

@@ -27,6 +27,15 @@ pub const CLIP_MARGIN_M: f32 = 0.02;
 /// Farthest depth the clip keeps, mm.
 pub const CLIP_MAX_DEPTH_MM: u16 = 4000;
 
+/// Checks a height ceiling given to the trainer or the evaluation (`--ceiling-m`), metres.
+pub fn check_ceiling(ceiling_m: f32) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        (0.0..=10.0).contains(&ceiling_m),
+        "--ceiling-m must be in [0, 10] m"
+    );
+    Ok(())
+}
+
 /// The clip of a view: above the mattress and head-section planes (camera frame), anywhere in the image.
 pub fn view_planes(truth: &ViewTruth) -> [Plane; 2] {
     [truth.planes_camera[1], truth.planes_camera[2]]

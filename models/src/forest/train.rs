@@ -258,10 +258,7 @@ pub fn train_on(
         "inference samples per frame (--infer-samples, default --samples) must be 1..={}",
         supine_core::forest::MAX_SAMPLES
     );
-    ensure!(
-        (0.0..=10.0).contains(&cfg.ceiling_m),
-        "--ceiling-m must be in [0, 10] m"
-    );
+    super::data::check_ceiling(cfg.ceiling_m)?;
     ensure!(
         (1..=supine_core::forest::feature::MAX_OFFSET).contains(&cfg.tree.offset_px_m),
         "--offset-px-m must be in 1..={}",
