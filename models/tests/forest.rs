@@ -331,3 +331,35 @@ fn training_views_are_read_through_the_trackers_ceiling() {
         "the arm rises over the ceiling in {arm_views} arm views: {cut_arm} px cut"
     );
 }
+
+#[test]
+fn a_per_point_lambda2_trains_each_point_as_its_own_value_would() {
+    // Each point's refined weights are learned independently, so a per-point λ2 gives, point by point, the leaves
+    // a single λ2 of that value gives (the trees do not depend on λ2).
+    let ds = Dataset::open(dataset()).unwrap();
+    let with = |lambda2: f32, lambda2_points: Option<[f32; 6]>| {
+        let cfg = TrainConfig {
+            refine: RefineParams {
+                epochs: 2,
+                lambda2,
+                lambda2_points,
+                ..RefineParams::default()
+            },
+            ..tiny()
+        };
+        train(&ds, &cfg, false).unwrap().0
+    };
+    let (a, b) = (1e-3, 3e-2);
+    let (fa, fb) = (with(a, None), with(b, None));
+    let mixed = with(a, Some([a, b, a, b, a, b]));
+    assert_eq!(fa.leaf_count(), mixed.leaf_count());
+    let mut differ = 0;
+    for (l, m) in mixed.refined.iter().enumerate() {
+        for (p, w) in m.iter().enumerate() {
+            let own = if p % 2 == 0 { &fa } else { &fb };
+            assert_eq!(w, &own.refined[l][p], "leaf {l}, point {p}");
+            differ += (fa.refined[l][p] != fb.refined[l][p]) as usize;
+        }
+    }
+    assert!(differ > 0, "the two values give different leaves");
+}

@@ -224,8 +224,10 @@ pub struct TrainJointsArgs {
     #[arg(long, default_value_t = 1e-3)]
     pub lambda1: f32,
     /// Refinement: λ2, weight of the per-sample term (Eq. 4); Table 1 says 1e-4, 1e-2 won on the validation bodies.
-    #[arg(long, default_value_t = 1e-2)]
-    pub lambda2: f32,
+    /// One value, or six comma-separated ones, one per salient point (head, left and right shoulder, belly, left and
+    /// right hip).
+    #[arg(long, value_delimiter = ',', default_value = "1e-2")]
+    pub lambda2: Vec<f32>,
     /// Refinement: L2 strength per step.
     #[arg(long, default_value_t = 1e-5)]
     pub l2: f32,
@@ -322,7 +324,11 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "--samples, --depth and --candidates must be positive"
     );
     ensure!(
-        a.lambda1 > 0.0 && a.lambda2 >= 0.0 && a.l2 >= 0.0 && a.lr > 0.0 && (0.0..1.0).contains(&a.momentum),
+        a.lambda1 > 0.0
+            && a.lambda2.iter().all(|&l| l >= 0.0)
+            && a.l2 >= 0.0
+            && a.lr > 0.0
+            && (0.0..1.0).contains(&a.momentum),
         "refinement parameters out of range"
     );
     ensure!(
@@ -353,7 +359,15 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
             lr: a.lr,
             momentum: a.momentum,
             lambda1: a.lambda1,
-            lambda2: a.lambda2,
+            lambda2: a.lambda2[0],
+            lambda2_points: match a.lambda2.len() {
+                1 => None,
+                n if n == SalientPoint::COUNT => Some(core::array::from_fn(|p| a.lambda2[p])),
+                n => anyhow::bail!(
+                    "--lambda2 takes one value or {} (one per salient point), not {n}",
+                    SalientPoint::COUNT
+                ),
+            },
             l2: a.l2,
             ..RefineParams::default()
         },

@@ -36,8 +36,19 @@ pub struct RefineParams {
     pub lambda1: f32,
     /// λ2: weight of the per-sample term (Eq. 4).
     pub lambda2: f32,
+    /// λ2 per salient point, overriding `lambda2` (each point's weights are learned independently, so each may
+    /// take the value its validation figures favour; files trained before it read as `None`).
+    #[serde(default)]
+    pub lambda2_points: Option<[f32; P]>,
     /// L2 strength per step (relative to the image term).
     pub l2: f32,
+}
+
+impl RefineParams {
+    /// λ2 of salient point `p`.
+    pub fn lambda2_of(&self, p: usize) -> f32 {
+        self.lambda2_points.map_or(self.lambda2, |l| l[p])
+    }
 }
 
 impl Default for RefineParams {
@@ -49,6 +60,7 @@ impl Default for RefineParams {
             momentum: 0.8,
             lambda1: 1e-3,
             lambda2: 1e-2,
+            lambda2_points: None,
             l2: 1e-5,
         }
     }
@@ -101,7 +113,7 @@ pub fn refine(
     let mut last = vec![0u64; n_leaves];
     let mut touched: Vec<u32> = Vec::new();
     let mut mark = vec![false; n_leaves];
-    let beta = params.lambda2 / params.lambda1;
+    let beta: [f32; D] = core::array::from_fn(|d| params.lambda2_of(d / 3) / params.lambda1);
     let mut order: Vec<usize> = fit.to_vec();
     let mut rng = SplitMix64::new(mix_seed(seed, 0x5EED));
     let mut step = 0u64;
@@ -156,7 +168,7 @@ pub fn refine(
                 for &l in &data.leaves[i][..trees] {
                     let g = &mut grad[l as usize];
                     for d in 0..D {
-                        g[d] += inv * (r[d] + beta * e[d]);
+                        g[d] += inv * (r[d] + beta[d] * e[d]);
                     }
                     if !mark[l as usize] {
                         mark[l as usize] = true;
