@@ -19,7 +19,6 @@ use supine_core::time::Timestamp;
 use supine_models::dataset::{Dataset, DatasetConfig, generate};
 use supine_models::forest::cli::default_path;
 use supine_models::forest::data::{clip_for, view_planes};
-use supine_models::render::noise::KinectNoise;
 use supine_models::scene::model_body::{BodyKind, open_source};
 
 /// This thread's CPU time so far, if the kernel tells it (the yield makes the scheduler bring it up to date).
@@ -44,9 +43,7 @@ fn bench(c: &mut Criterion) {
         occluder_fraction: 0.3,
         train_fraction: 0.5,
         previews: 0,
-        noise: KinectNoise::default(),
-        view_distance_scale: 1.0,
-        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
+        ..DatasetConfig::default()
     };
     let source = open_source(BodyKind::Model, None).or_else(|_| open_source(BodyKind::Mannequin, None));
     generate(source.expect("a body source").as_ref(), &cfg, &dir, &|| {}).expect("bench views");

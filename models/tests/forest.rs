@@ -22,7 +22,6 @@ use supine_models::forest::refine::RefineParams;
 use supine_models::forest::sidecar::{self, FloatLeaves};
 use supine_models::forest::train::{TrainConfig, train};
 use supine_models::forest::tree::TreeParams;
-use supine_models::render::noise::KinectNoise;
 use supine_models::scene::body::Mannequin;
 
 fn dataset() -> &'static PathBuf {
@@ -37,9 +36,7 @@ fn dataset() -> &'static PathBuf {
             occluder_fraction: 0.5,
             train_fraction: 0.7,
             previews: 0,
-            noise: KinectNoise::default(),
-            view_distance_scale: 1.0,
-            crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
+            ..DatasetConfig::default()
         };
         generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
         dir

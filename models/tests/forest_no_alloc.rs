@@ -13,7 +13,6 @@ use supine_models::forest::data::{clip_for, view_planes};
 use supine_models::forest::refine::RefineParams;
 use supine_models::forest::train::{TrainConfig, train};
 use supine_models::forest::tree::TreeParams;
-use supine_models::render::noise::KinectNoise;
 use supine_models::scene::body::Mannequin;
 use supine_tests::alloc_count::{Counting, count_allocations, counter_is_installed};
 
@@ -31,9 +30,7 @@ fn inference_allocates_nothing() {
         occluder_fraction: 0.5,
         train_fraction: 0.75,
         previews: 0,
-        noise: KinectNoise::default(),
-        view_distance_scale: 1.0,
-        crop_margin_px: supine_models::dataset::CROP_MARGIN_PX,
+        ..DatasetConfig::default()
     };
     generate(&Mannequin, &cfg, &dir, &|| {}).unwrap();
     let ds = Dataset::open(&dir).unwrap();

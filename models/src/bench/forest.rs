@@ -12,7 +12,6 @@ use crate::forest::data::{TrainImage, clip_for, view_planes};
 use crate::forest::refine::RefineParams;
 use crate::forest::train::{TrainConfig, image_seed, split_validation, train};
 use crate::forest::tree::TreeParams;
-use crate::render::noise::KinectNoise;
 use crate::scene::model_body::{BodyKind, open_source};
 use anyhow::{Context, Result, ensure};
 use rand::Rng;
@@ -128,9 +127,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
         occluder_fraction: 0.3,
         train_fraction: 0.7,
         previews: 0,
-        noise: KinectNoise::default(),
-        view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
+        ..DatasetConfig::default()
     };
     let source = open_source(BodyKind::Model, None)?;
     let t_gen = Instant::now();

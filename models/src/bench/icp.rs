@@ -9,7 +9,6 @@
 use super::npy;
 use crate::body::{BodyModel, Shape};
 use crate::dataset::{Dataset, DatasetConfig, generate as generate_dataset};
-use crate::render::noise::KinectNoise;
 use crate::scene::model_body::{BodyKind, open_source};
 use crate::shape::data::body_pose;
 use anyhow::{Context, Result, ensure};
@@ -221,9 +220,7 @@ pub fn run(cfg: &ProblemConfig, stop: &StopRule, out: &Path, progress: bool) -> 
         // the benchmark's own), and both splits become problems.
         train_fraction: 0.5,
         previews: 0,
-        noise: KinectNoise::default(),
-        view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
+        ..DatasetConfig::default()
     };
     generate_dataset(source.as_ref(), &dcfg, &dir, &|| {})?;
     let ds = Dataset::open(&dir)?;

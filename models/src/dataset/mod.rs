@@ -79,6 +79,23 @@ pub struct DatasetConfig {
     pub crop_margin_px: u16,
 }
 
+impl Default for DatasetConfig {
+    /// What `supine-models dataset` renders without options.
+    fn default() -> Self {
+        DatasetConfig {
+            bodies: cli::DEFAULT_BODIES,
+            views: 12,
+            seed: 0,
+            occluder_fraction: 0.3,
+            train_fraction: 0.7,
+            previews: 4,
+            noise: KinectNoise::default(),
+            view_distance_scale: 1.0,
+            crop_margin_px: CROP_MARGIN_PX,
+        }
+    }
+}
+
 fn default_crop_margin() -> u16 {
     CROP_MARGIN_PX
 }
@@ -630,9 +647,7 @@ mod tests {
             occluder_fraction: 0.5,
             train_fraction: 0.7,
             previews: 1,
-            noise: KinectNoise::default(),
-            view_distance_scale: 1.0,
-            crop_margin_px: CROP_MARGIN_PX,
+            ..DatasetConfig::default()
         }
     }
 

@@ -116,7 +116,6 @@ pub fn train_validation(ds: &Dataset) -> (Vec<u32>, Vec<u32>) {
 /// split, half the views with the arm.
 pub fn small_dataset(dir: &std::path::Path, bodies: u32, views: u16, seed: u64) -> Result<Dataset> {
     use crate::dataset::{DatasetConfig, generate};
-    use crate::render::noise::KinectNoise;
     let cfg = DatasetConfig {
         bodies,
         views,
@@ -124,9 +123,7 @@ pub fn small_dataset(dir: &std::path::Path, bodies: u32, views: u16, seed: u64) 
         occluder_fraction: 0.5,
         train_fraction: 0.7,
         previews: 0,
-        noise: KinectNoise::default(),
-        view_distance_scale: 1.0,
-        crop_margin_px: crate::dataset::CROP_MARGIN_PX,
+        ..DatasetConfig::default()
     };
     let source = crate::scene::model_body::ModelBodySource::load(None)?;
     generate(&source, &cfg, dir, &|| {})?;
