@@ -447,6 +447,7 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
 
 /// Run `eval joints`.
 pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
+    super::data::check_ceiling(a.ceiling_m)?;
     let ds = Dataset::open(&a.data)?;
     let path = a.model.clone().unwrap_or_else(default_path);
     let bytes = std::fs::read(&path).with_context(|| format!("reading {}", path.display()))?;
@@ -548,7 +549,6 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
         model: &view,
         method: Method::Refined,
     });
-    super::data::check_ceiling(a.ceiling_m)?;
     let (table, images) =
         pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, a.ceiling_m, true))?;
     print!("{}", text_table(&cands, &table));
