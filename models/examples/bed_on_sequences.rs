@@ -3,8 +3,9 @@
 //! prints against the sequence's true planes what it found (mattress error, section angle) and, per labelled plane
 //! that is not vertical, what its points are: how many, their share on the true section, their tilt from up, the
 //! 1st percentile of their height above the true and the found mattress (a section's bottom), their spread along the
-//! plane's level lines (5th-95th percentile: a section spans the bed), and the points within the plane's inlier band
-//! at the found mattress (the hinge test).
+//! plane's level lines (5th-95th percentile: a section spans the bed), how many of their local normals agree with the
+//! plane's (`flat a/t`, the one-surface test), and the points within the plane's inlier band at the found mattress
+//! (the hinge test).
 //!
 //! `cargo run --release -p supine-models --example bed_on_sequences -- SEQ_DIR_OR_PARENT [FRAMES]`
 //! Cost: per sequence and frame one plane search (a few ms) and a few passes over its 8 k points.
@@ -37,6 +38,7 @@ fn sorted(points: &[Point3<f32>], f: impl Fn(&Point3<f32>) -> f32) -> Vec<f32> {
 }
 
 /// One line per non-vertical labelled plane of `bed`'s search.
+#[allow(clippy::too_many_arguments)] // the search's points and labels, its result, the truth, the frame and settings
 fn describe_planes(
     pts: &[Point3<f32>],
     labels: &[u8],
@@ -45,6 +47,7 @@ fn describe_planes(
     raised: bool,
     up: &Vector3<f32>,
     cfg: &PlaneConfig,
+    surface: Option<(&supine_core::depth::DepthFrame<'_>, &Intrinsics)>,
 ) {
     let [mattress_t, section_t] = truth;
     for l in 1..=6u8 {
@@ -83,6 +86,11 @@ fn describe_planes(
             100.0 * on_section as f32 / own.len() as f32,
             quantile(&h_true, 0.01),
         );
+        if let Some((f, k)) = surface {
+            let plane = Plane::through(c, normal);
+            let (tested, agree) = planes::surface_agreement(f, k, &plane, pts, labels, l);
+            line += &format!(", flat {agree}/{tested}");
+        }
         if let Some(bed) = bed {
             let h_found = sorted(&own, |p| bed.mattress.signed_distance(p));
             let d = -normal.dot(&c);
@@ -154,6 +162,7 @@ fn main() -> Result<()> {
                 raise > 1.0,
                 &up,
                 &cfg,
+                Some((&frame, &k)),
             );
         }
     }
