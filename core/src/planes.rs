@@ -185,6 +185,23 @@ const HINGE_BAND_M: f32 = 0.03;
 const HINGE_MIN_POINTS: u32 = 8;
 /// See [`HINGE_MIN_POINTS`].
 const HINGE_SHARE_INV: u32 = 200;
+/// A head section's share of local normals along its own: on the first frames of the 156 stored tracking sequences
+/// the 32 true sections had 0.81-0.98, the one false section (s11010: a plane through the patient, the arm and a
+/// strip of floor) 0.53, and nine tenths of the other tilted planes found under 0.63.
+const SURFACE_MIN_SHARE: f32 = 0.7;
+/// Fewest points with a local normal for [`one_surface`] to judge.
+const SURFACE_MIN_TESTED: usize = 20;
+
+/// Local normals within this angle of a plane's agree with it, degrees (the depth noise over [`SURFACE_STEP_PX`]
+/// tilts a flat surface's local normal by up to about 10° at 2 m).
+const SURFACE_NORMAL_DEG: f32 = 25.0;
+/// Pixels to the neighbours a local normal is taken from.
+const SURFACE_STEP_PX: u16 = 6;
+/// A neighbour this much nearer or farther than the point is across an edge, metres.
+const SURFACE_STEP_JUMP_M: f32 = 0.05;
+/// Points a [`surface_agreement`] tests at most.
+const SURFACE_SAMPLES: usize = 256;
+
 /// A head section's normal lies within this angle of the plane of up and the bed's long axis, degrees.
 const HINGE_AXIS_DEG: f32 = 8.0;
 /// A head section's own inliers spread at least this far along its hinge line, as a standard deviation, metres (a
@@ -720,23 +737,6 @@ fn one_surface(
     let (tested, agree) = surface_agreement(frame, k, plane, points, labels, label);
     tested < SURFACE_MIN_TESTED || agree as f32 >= SURFACE_MIN_SHARE * tested as f32
 }
-
-/// A head section's share of local normals along its own: on the first frames of the 156 stored tracking sequences
-/// the 32 true sections had 0.81-0.98, the one false section (s11010: a plane through the patient, the arm and a
-/// strip of floor) 0.53, and nine tenths of the other tilted planes found under 0.63.
-const SURFACE_MIN_SHARE: f32 = 0.7;
-/// Fewest points with a local normal for [`one_surface`] to judge.
-const SURFACE_MIN_TESTED: usize = 20;
-
-/// Local normals within this angle of a plane's agree with it, degrees (the depth noise over [`SURFACE_STEP_PX`]
-/// tilts a flat surface's local normal by up to about 10° at 2 m).
-const SURFACE_NORMAL_DEG: f32 = 25.0;
-/// Pixels to the neighbours a local normal is taken from.
-const SURFACE_STEP_PX: u16 = 6;
-/// A neighbour this much nearer or farther than the point is across an edge, metres.
-const SURFACE_STEP_JUMP_M: f32 = 0.05;
-/// Points a [`surface_agreement`] tests at most.
-const SURFACE_SAMPLES: usize = 256;
 
 /// The principal direction, in the plane normal to `nz`, of the points `keep` accepts (a lying patient's long axis).
 fn long_axis(points: &[Point3], nz: &Vector3, keep: &dyn Fn(&Point3) -> bool) -> Vector3 {
