@@ -9,19 +9,19 @@
 //! found alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the
 //! points lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not
 //! give. A raised head section is the largest plane tilted from up that spans the bed, rises from the mattress at a
-//! hinge, ends below the volume's top and is one flat surface (its points' local normals along its own); the clip keeps only what lies above it as well, and the bed's long axis
-//! runs up its slope. A patient on a raised section can hide the whole mattress: then a bed-wide tilted plane larger
-//! than the chosen mattress whose bottom lies well below it (an arm link's or the legs' flat top was chosen) or a
-//! bed's height above it (the floor was) places the mattress level through that bottom. Up is the caller's (from
-//! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
-//! steeply raised head section in a close view can defeat.
+//! hinge, ends below the volume's top and is one flat surface (its points' local normals along its own); the clip keeps
+//! only what lies above it as well, and the bed's long axis runs up its slope. A patient on a raised section can hide
+//! the whole mattress: then a bed-wide tilted plane larger than the chosen mattress whose bottom lies well below it (an
+//! arm link's or the legs' flat top was chosen) or a bed's height above it (the floor was) places the mattress level
+//! through that bottom. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without either, the
+//! largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
-//! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once).
-//! Telling floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a
-//! million comparisons). The head-section tests add a few passes over the points and up to 256 local normals (four
-//! depth reads each) per tilted plane. The clip is one
-//! rigid transform and six comparisons per point. Nothing allocates: the caller lends the scratch.
+//! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once). Telling
+//! floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a million
+//! comparisons). The head-section tests add a few passes over the points and up to 256 local normals (four depth reads
+//! each) per tilted plane. The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller
+//! lends the scratch.
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
@@ -185,7 +185,7 @@ const HINGE_BAND_M: f32 = 0.03;
 const HINGE_MIN_POINTS: u32 = 8;
 /// See [`HINGE_MIN_POINTS`].
 const HINGE_SHARE_INV: u32 = 200;
-/// A head section's share of local normals along its own: on the first frames of the 156 stored tracking sequences
+/// A head section's share of local normals along its own: on the first frames of the 154 stored tracking sequences
 /// the 32 true sections had 0.81-0.98, the one false section (s11010: a plane through the patient, the arm and a
 /// strip of floor) 0.53, and nine tenths of the other tilted planes found under 0.63.
 const SURFACE_MIN_SHARE: f32 = 0.7;
@@ -412,7 +412,7 @@ pub fn estimate_bed(
                 })
         })
         .filter(|(i, (p, _))| spans_the_bed(p, &mattress.normal(), points, labels, *i as u8 + 1, found))
-        .filter(|(i, (p, _))| one_surface(frame, k, p, points, labels, *i as u8 + 1))
+        .filter(|(i, (p, _))| one_surface(surface_agreement(frame, k, p, points, labels, *i as u8 + 1)))
         .max_by_key(|(_, (_, m))| *m)
         .map(|(_, (p, _))| *p);
     let floor_n = floor.map_or(0, |(_, n)| n);
@@ -723,18 +723,10 @@ pub fn surface_agreement(
     (tested, agree)
 }
 
-/// Whether a tilted plane's own inliers are one flat surface, as a head section is: at least
-/// [`SURFACE_MIN_SHARE`] of their local normals agree with the plane's ([`surface_agreement`]). With fewer than
-/// [`SURFACE_MIN_TESTED`] testable points it cannot tell and does not object.
-fn one_surface(
-    frame: &DepthFrame<'_>,
-    k: &Intrinsics,
-    plane: &Plane,
-    points: &[Point3],
-    labels: &[u8],
-    label: u8,
-) -> bool {
-    let (tested, agree) = surface_agreement(frame, k, plane, points, labels, label);
+/// Whether a tilted plane's own inliers are one flat surface, as a head section is, from their
+/// [`surface_agreement`] `(tested, agree)`: at least [`SURFACE_MIN_SHARE`] of the tested local normals agree with the
+/// plane's. With fewer than [`SURFACE_MIN_TESTED`] testable points it cannot tell and does not object.
+fn one_surface((tested, agree): (usize, usize)) -> bool {
     tested < SURFACE_MIN_TESTED || agree as f32 >= SURFACE_MIN_SHARE * tested as f32
 }
 
@@ -1070,7 +1062,7 @@ mod tests {
                 }
             }
             let (tested, agree) = surface_agreement(&frame, &k, plane, &pts, &lab, 1);
-            (tested, agree, one_surface(&frame, &k, plane, &pts, &lab, 1))
+            (tested, agree, one_surface((tested, agree)))
         };
         let (tested, agree, flat_ok) = judge(&flat, &plane);
         assert!(

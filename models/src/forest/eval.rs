@@ -139,6 +139,7 @@ pub fn evaluate(
                         let planes = view_planes(&v.truth);
                         let clip = clip_for(&planes, &k);
                         let sub = if v.truth.probe.is_some() { 1 } else { 2 };
+                        let ceiling = Ceiling::new(&frame, &k, &planes, ceiling_m);
                         for (ci, c) in cands.iter().enumerate() {
                             let cfg = InferConfig {
                                 samples,
@@ -146,8 +147,7 @@ pub fn evaluate(
                                 method: c.method,
                             };
                             let est = if ceiling_m > 0.0 {
-                                let img = Ceiling::new(&frame, &k, &planes, ceiling_m);
-                                estimate(c.model, &img, &k, &clip, &cfg, &[None; P], ws)
+                                estimate(c.model, &ceiling, &k, &clip, &cfg, &[None; P], ws)
                             } else {
                                 estimate(c.model, &frame, &k, &clip, &cfg, &[None; P], ws)
                             };
