@@ -93,6 +93,19 @@ impl Association {
     }
 }
 
+/// One extra linearised residual of a rigid step beside the point-to-plane pairs: `r + j·(ω, t)` with the step's
+/// rotation `ω` and translation `t` (camera frame), weighted by `w` times the step's pair count (so `w = 1` weighs
+/// it like all pairs together at the same residual).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PriorRow {
+    /// Jacobian: rotation part then translation part.
+    pub j: [f32; 6],
+    /// Residual at the current pose (metres).
+    pub r: f32,
+    /// Weight per pair of the step's data term.
+    pub w: f32,
+}
+
 /// Why an ICP step could not be taken.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum IcpError {
@@ -251,6 +264,17 @@ pub fn associate<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
     a
 }
 
+/// Add residual `r` with Jacobian `j` and weight `w` to the normal equations `a` (lower triangle) and `b`.
+#[inline(always)]
+fn accumulate(a: &mut [[f32; 6]; 6], b: &mut [f32; 6], j: &[f32; 6], r: f32, w: f32) {
+    for x in 0..6 {
+        b[x] -= w * j[x] * r;
+        for y in 0..=x {
+            a[x][y] += w * j[x] * j[y];
+        }
+    }
+}
+
 /// One point-to-plane Gauss-Newton step: the updated `camera_from_model` and the association it was computed from.
 #[allow(clippy::too_many_arguments)] // as `associate`
 pub fn point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
@@ -271,12 +295,13 @@ pub fn point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
         camera_from_model,
         params,
         f32::INFINITY,
+        &[],
     )
 }
 
 /// [`point_to_plane_step`] with Huber weights: a pair whose point-to-plane residual exceeds `huber_m` counts with
 /// weight `huber_m / |r|` (one IRLS step), so the few wrong pairs at the occluder's rim or a raised hand do not drag
-/// the pose. `f32::INFINITY` gives plain least squares.
+/// the pose. `f32::INFINITY` gives plain least squares. `rows` are prior residuals added to the same system.
 #[allow(clippy::too_many_arguments)] // as `associate`
 pub fn robust_point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
     frame: &DepthFrame<'_>,
@@ -287,6 +312,7 @@ pub fn robust_point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3
     camera_from_model: &Isometry3,
     params: &IcpParams,
     huber_m: f32,
+    rows: &[PriorRow],
 ) -> Result<(Isometry3, Association), IcpError> {
     let mut a = [[0.0f32; 6]; 6];
     let mut b = [0.0f32; 6];
@@ -307,17 +333,14 @@ pub fn robust_point_to_plane_step<P: Copy + Into<Point3>, N: Copy + Into<Vector3
                 1.0
             };
             let c = p.coords.cross(n);
-            let j = [c.x, c.y, c.z, n.x, n.y, n.z];
-            for x in 0..6 {
-                b[x] -= w * j[x] * r;
-                for y in 0..=x {
-                    a[x][y] += w * j[x] * j[y];
-                }
-            }
+            accumulate(&mut a, &mut b, &[c.x, c.y, c.z, n.x, n.y, n.z], r, w);
         },
     );
     if assoc.pairs < 6 {
         return Err(IcpError::TooFewPairs { pairs: assoc.pairs });
+    }
+    for row in rows {
+        accumulate(&mut a, &mut b, &row.j, row.r, row.w * assoc.pairs as f32);
     }
     // A whisper of damping keeps a nearly planar patch from sliding without bound.
     for (i, row) in a.iter_mut().enumerate() {
@@ -354,5 +377,58 @@ mod tests {
         // The flat part stays bed, and a body lying on it stays body (the extended section plane is far below).
         assert!(params.is_bed(&on_flat));
         assert!(!params.is_bed(&Point3::new(0.1, -0.5, 0.1)));
+    }
+
+    #[test]
+    fn a_prior_row_moves_the_pose_where_the_pairs_leave_it_free() {
+        // A flat wall 1 m in front of a small camera: the pairs fix depth, pitch and roll, and leave the slide
+        // across the wall free; a row asking for x 1 cm lower takes the step there and changes nothing else.
+        let k = Intrinsics {
+            fx: 60.0,
+            fy: 60.0,
+            cx: 31.5,
+            cy: 23.5,
+            width: 64,
+            height: 48,
+        };
+        let depth = [1000u16; 64 * 48];
+        let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
+        let mut points = [Point3::origin(); 25];
+        for (i, p) in points.iter_mut().enumerate() {
+            *p = Point3::new(-0.2 + 0.1 * (i % 5) as f32, -0.2 + 0.1 * (i / 5) as f32, 1.0);
+        }
+        let normals = [Vector3::new(0.0, 0.0, -1.0); 25];
+        let below = Plane::through(Vector3::new(0.0, 0.0, 3.0), Vector3::new(0.0, 0.0, -1.0));
+        let params = IcpParams::new(below);
+        let row = PriorRow {
+            j: [0.0, 0.0, 0.0, 1.0, 0.0, 0.0],
+            r: 0.01,
+            w: 1.0,
+        };
+        let step = |rows: &[PriorRow]| {
+            let (pose, a) = robust_point_to_plane_step(
+                &frame,
+                &k,
+                &points,
+                Some(&normals[..]),
+                1,
+                &Isometry3::identity(),
+                &params,
+                f32::INFINITY,
+                rows,
+            )
+            .unwrap();
+            assert_eq!(a.pairs, 25);
+            pose
+        };
+        let free = step(&[]);
+        assert!(free.translation.vector.norm() < 1e-5 && free.rotation.angle() < 1e-5);
+        let held = step(&[row]);
+        let t = held.translation.vector;
+        assert!(
+            (t.x + 0.01).abs() < 1e-4 && t.y.abs() < 1e-5 && t.z.abs() < 1e-5,
+            "{t:?}"
+        );
+        assert!(held.rotation.angle() < 1e-4);
     }
 }

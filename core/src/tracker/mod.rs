@@ -1044,13 +1044,22 @@ impl<'m, 's> Tracker<'m, 's> {
             // The best fit, and whether it moves the coasting pose (`TorsoIcpConfig::follow_occluded`).
             let mut best: Option<(Isometry3, TorsoFit, FitQuality, bool)> = None;
             for (i, start) in starts.iter().enumerate() {
+                // The back-on-the-bed prior steers fits from the forest and the bed, not the temporal one.
+                let cfg_i = if from_prior(i) {
+                    TorsoIcpConfig {
+                        bed_pitch_weight: 0.0,
+                        ..icp_cfg
+                    }
+                } else {
+                    icp_cfg
+                };
                 let (pose, fit) = torso_icp::fit_torso(
                     frame,
                     &self.k,
                     self.scratch.torso_vertices,
                     self.scratch.torso_normals,
                     *start,
-                    &icp_cfg,
+                    &cfg_i,
                     if from_prior(i) {
                         &temporal_params
                     } else {

@@ -67,6 +67,10 @@ pub struct TrackingEvalArgs {
     /// point held on the mattress).
     #[arg(long)]
     pub refit_bed_contact: bool,
+    /// The tracker's `bed_pitch_weight` (default: the tracker's, 3; 0: off): the back-on-the-bed prior in fits
+    /// from every start but the temporal one.
+    #[arg(long)]
+    pub bed_pitch_weight: Option<f32>,
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]
     pub lock_refits: Option<u8>,
@@ -209,6 +213,9 @@ pub fn run_variant(
     cfg.icp.follow_occluded = args.follow_occluded;
     if args.refit_bed_contact {
         cfg.refit_bed_contact = Some(supine_core::fit::BedContact::default());
+    }
+    if let Some(w) = args.bed_pitch_weight {
+        cfg.icp.bed_pitch_weight = w;
     }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
