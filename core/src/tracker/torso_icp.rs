@@ -83,7 +83,9 @@ pub struct TorsoIcpConfig {
     /// lowest points of the torso's hip half and of its shoulder half lie about equally high above the bed. It
     /// holds the torso's pitch where the visible surface does not (a belly with the chest hidden: acquisitions 10-15°
     /// off in pitch that then coasted as occluded). The temporal fit goes without it: there it turned good tracks
-    /// (validation s5005: 12 -> 49 mm). 0 turns it off.
+    /// (validation s5005: 12 -> 49 mm). Off (0) by default: at 3 it cut the validation torso error (14.0 -> 11.8 mm
+    /// mean), but on the fresh held-out 13001-13024 it made two good tracks wrong locks (one flipped end to end
+    /// during the full occlusion) and refused two wrong ones (`docs/tracking.md`).
     pub bed_pitch_weight: f32,
     /// How far the shoulder half's lowest point lies above the hip half's on a lying patient, metres (negative:
     /// below; the torso frame from the salient points is not parallel to the back). Median -25 mm over the true
@@ -119,7 +121,7 @@ impl Default for TorsoIcpConfig {
             occluder_margin_m: 0.04,
             max_distance_m: 0.1,
             behind_margin_m: 0.04,
-            bed_pitch_weight: 3.0,
+            bed_pitch_weight: 0.0,
             bed_pitch_offset_m: -0.025,
             bed_pitch_tolerance_m: 0.03,
         }
@@ -237,19 +239,10 @@ fn above_bed(p: &Point3, params: &IcpParams) -> (f32, Vector3) {
     }
 }
 
-/// The back-on-the-bed row ([`TorsoIcpConfig::bed_pitch_weight`]) at `pose`: the lowest vertex of the hip half
-/// (torso `y` under the middle of the model's extent) against the lowest of the shoulder half, their heights above
-/// the bed brought within the tolerance of the offset. `None` when off or within it. Cost: two passes over the
-/// vertices (a transform and two plane distances each) per ICP iteration.
-fn bed_pitch_row(
-    vertices: &[Point3],
-    pose: &Isometry3,
-    params: &IcpParams,
-    cfg: &TorsoIcpConfig,
-) -> Option<icp::PriorRow> {
-    if cfg.bed_pitch_weight <= 0.0 || vertices.is_empty() {
-        return None;
-    }
+/// The lowest vertex of the torso's hip half (torso `y` under the middle of the model's extent) and of its shoulder
+/// half at `pose`: each one's height above the bed, position and the bed surface's normal there. Cost: two passes
+/// over the vertices (a transform and two plane distances each).
+fn lowest_halves(vertices: &[Point3], pose: &Isometry3, params: &IcpParams) -> [(f32, Point3, Vector3); 2] {
     let (lo, hi) = vertices
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
@@ -265,7 +258,22 @@ fn bed_pitch_row(
             *half = (h, p, n);
         }
     }
-    let [(hh, ph, nh), (hs, ps, ns)] = lowest;
+    lowest
+}
+
+/// The back-on-the-bed row ([`TorsoIcpConfig::bed_pitch_weight`]) at `pose`: the shoulder half's lowest height
+/// above the bed less the hip half's, less the offset, brought within the tolerance. `None` when off or within it.
+/// Cost: [`lowest_halves`] per ICP iteration.
+fn bed_pitch_row(
+    vertices: &[Point3],
+    pose: &Isometry3,
+    params: &IcpParams,
+    cfg: &TorsoIcpConfig,
+) -> Option<icp::PriorRow> {
+    if cfg.bed_pitch_weight <= 0.0 || vertices.is_empty() {
+        return None;
+    }
+    let [(hh, ph, nh), (hs, ps, ns)] = lowest_halves(vertices, pose, params);
     let r = hs - hh - cfg.bed_pitch_offset_m;
     if libm::fabsf(r) <= cfg.bed_pitch_tolerance_m {
         return None;

@@ -67,8 +67,8 @@ pub struct TrackingEvalArgs {
     /// point held on the mattress).
     #[arg(long)]
     pub refit_bed_contact: bool,
-    /// The tracker's `bed_pitch_weight` (default: the tracker's, 3; 0: off): the back-on-the-bed prior in fits
-    /// from every start but the temporal one.
+    /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
+    /// in fits from every start but the temporal one.
     #[arg(long)]
     pub bed_pitch_weight: Option<f32>,
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
