@@ -88,11 +88,12 @@ pub struct TorsoIcpConfig {
     /// during the full occlusion) and refused two wrong ones (`docs/tracking.md`).
     pub bed_pitch_weight: f32,
     /// How far the shoulder half's lowest point lies above the hip half's on a lying patient, metres (negative:
-    /// below; the torso frame from the salient points is not parallel to the back). Median -25 mm over the true
-    /// poses of the validation sequences val and val2.
+    /// below; the torso frame from the salient points is not parallel to the back). On the validation sequences
+    /// val and val2 at the true poses: medians -23 to -31 mm with the true shapes, -22 and -25 with the estimated.
     pub bed_pitch_offset_m: f32,
     /// The prior pulls only beyond this difference from the offset, metres: bodies, rolls and the shape estimate's
-    /// error spread it (-47 to +6 mm, 10th-90th percentile, estimated shapes at true poses on val and val2).
+    /// error spread it (10th-90th percentile with the estimated shapes at true poses: -37 to -9 mm on val, -47 to +6
+    /// on val2).
     pub bed_pitch_tolerance_m: f32,
 }
 
