@@ -170,6 +170,15 @@ const FREE: u8 = 0;
 const NO_LABEL: u8 = u8::MAX;
 /// A found mattress this far above the bottom of a raised head section is not the mattress, metres.
 const SECTION_BELOW_MATTRESS_M: f32 = 0.05;
+/// A level plane whose points lie mostly this far under a raised head section's plane is the bed's base bared by
+/// the section, not the mattress (metres).
+const BASE_UNDER_SECTION_M: f32 = 0.03;
+/// The bed's base lies at least this far under the lowest visible part of a raised section, metres (a mattress's
+/// thickness less the few centimetres the section's bottom can lie below the mattress's top).
+const BASE_BELOW_SECTION_M: f32 = 0.08;
+/// A hospital mattress's thickness (12-20 cm; the synthetic beds 12-18 cm), metres: where the base under a raised
+/// section is all that shows of the bed, the mattress is taken this far above it.
+const NOMINAL_MATTRESS_THICKNESS_M: f32 = 0.15;
 /// How far above the mattress the lowest visible part of a raised head section can lie, metres: the patient's hips
 /// hide the hinge, and beside them the arm or the view can hide the section's lower edge too (14 cm on s402).
 const SECTION_BOTTOM_HIDDEN_M: f32 = 0.15;
@@ -333,17 +342,76 @@ pub fn estimate_bed(
     // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
     // in depth layers a few centimetres apart, which may be found as planes of their own), and far enough from the
     // camera for a patient lying on it to be seen (an arm link's flat top near the camera is not it).
+    let bottom = section_bottom(points, labels, found, &up, floor.map(|(f, _)| f));
+    // A raised head section bares the bed's base under it: a level plane a mattress's thickness below the mattress,
+    // seen through the wedge between the section and the base, that can be all the camera sees level at a bed's
+    // height when the patient and the section hide the flat mattress (s13006, s13022: the base taken for the
+    // mattress 12-16 cm low, the section then refused). Its points lie under the section's plane; the flat
+    // mattress, on the other side of the hinge, lies above that plane's extension.
+    let under_section = |i: usize| {
+        bottom.as_ref().is_some_and(|b| {
+            let section = &found[b.label as usize - 1].0;
+            let candidate = &found[i];
+            // Only a section larger than the plane, rising from well above it and one flat surface tells (on a
+            // flat bed the arm's links and the patient's own surfaces make tilted planes over the mattress too).
+            if b.points <= candidate.1
+                || b.height_above(&candidate.0, points, labels) < BASE_BELOW_SECTION_M
+                || !one_surface(surface_agreement(frame, k, section, points, labels, b.label))
+            {
+                return false;
+            }
+            let (under, all) = points
+                .iter()
+                .zip(labels.iter())
+                .filter(|(_, l)| **l == i as u8 + 1)
+                .fold((0u32, 0u32), |(u, a), (p, _)| {
+                    (
+                        u + u32::from(section.signed_distance(p) < -BASE_UNDER_SECTION_M),
+                        a + 1,
+                    )
+                });
+            all > 0 && under * 2 > all
+        })
+    };
+    let level_at_bed_height = |p: &Plane| {
+        p.normal().dot(&up) >= cos_up
+            && floor.is_none_or(|(f, _)| bed_height(&f, p))
+            && p.d >= MIN_MATTRESS_DISTANCE_M
+    };
+    let base = found
+        .iter()
+        .enumerate()
+        .filter(|(i, (p, _))| level_at_bed_height(p) && under_section(*i))
+        .max_by(|a, b| a.1.0.d.total_cmp(&b.1.0.d))
+        .map(|(_, (p, _))| *p);
     let chosen = found
         .iter()
-        .filter(|(p, _)| p.normal().dot(&up) >= cos_up && floor.is_none_or(|(f, _)| bed_height(&f, p)))
-        .filter(|(p, _)| p.d >= MIN_MATTRESS_DISTANCE_M)
-        .max_by(|a, b| a.0.d.total_cmp(&b.0.d))
-        .copied();
+        .enumerate()
+        .filter(|(i, (p, _))| level_at_bed_height(p) && !under_section(*i))
+        .max_by(|a, b| a.1.0.d.total_cmp(&b.1.0.d))
+        .map(|(_, f)| *f);
     // A patient on a raised head section can hide the whole mattress; then the flat top of an arm link, or the
     // floor, is taken for it. The section still shows: its lowest points lie on the mattress (within 1-3 cm on 11 of
     // 12 raised sections of the validation and diagnostic sequences), so a mattress far above or far below them is
-    // replaced by the level plane through them.
-    let bottom = section_bottom(points, labels, found, &up, floor.map(|(f, _)| f));
+    // replaced by the level plane through them; with the base in view, a typical mattress's thickness above the
+    // base unless that is above the section's bottom (the hips can hide the hinge).
+    let section_level = |b: &SectionBottom<'_>| {
+        let level = b.level(points, labels);
+        match base {
+            Some(base) => {
+                let on_base = Plane {
+                    normal: base.normal,
+                    d: base.d - NOMINAL_MATTRESS_THICKNESS_M,
+                };
+                if b.height_above(&on_base, points, labels) >= 0.0 {
+                    on_base
+                } else {
+                    level
+                }
+            }
+            None => level,
+        }
+    };
     let (mattress, mattress_n) = match (chosen, bottom) {
         (Some((m, n)), Some(b)) => {
             let below = b.height_above(&m, points, labels);
@@ -351,13 +419,13 @@ pub fn estimate_bed(
             // Only a section larger than the chosen plane tells: the arm's links line up into tilted planes too,
             // reaching from beside the bed's base to high above the mattress, but smaller than a visible mattress.
             if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || below > FLOOR_TO_MATTRESS_M.0) {
-                (b.level(points, labels), 0)
+                (section_level(&b), 0)
             } else {
                 (m, n)
             }
         }
         (Some(m), None) => m,
-        (None, Some(b)) => (b.level(points, labels), 0),
+        (None, Some(b)) => (section_level(&b), 0),
         // Only planes too near the camera for a patient on them to be seen lie a bed's height above the "floor":
         // they are the arm's links, and there is no floor in view (a low view); the mattress is the farthest
         // level plane.
@@ -1121,6 +1189,65 @@ mod tests {
         // Deterministic for the seed.
         let again = estimate_bed(&frame, &k, &PlaneConfig::default(), None, &mut pts, &mut lab).unwrap();
         assert_eq!(again, bed);
+    }
+
+    #[test]
+    fn the_base_bared_by_a_raised_section_is_not_the_mattress() {
+        // World z up. A bed whose flat mattress (top z = 0) is out of sight but for the hinge at y = 0, where the
+        // head section rises 35° toward +y as a thin plate 0.9 m wide; under it the bed's base (top z = -0.15),
+        // seen from the side through the wedge; the floor at z = -0.75; a patient's block on the section. The camera
+        // is beside the bed, above it.
+        let k = Intrinsics::KINECT_V1;
+        let raise = 35f32.to_radians();
+        let (sr, cr) = (libm::sinf(raise), libm::cosf(raise));
+        let eye = Vector3::new(-1.3, 0.2, 1.2);
+        let world_from_camera = looking_at(eye, Vector3::new(0.0, 0.45, 0.0));
+        let camera_from_world = world_from_camera.inverse();
+        let section_n = Vector3::new(0.0, -sr, cr);
+        let depth = depth_of(|ray_c| {
+            let ray = world_from_camera.rotation * ray_c;
+            let mut best = f32::INFINITY;
+            // Nearest hit of the ray with the plane n·p = c inside `inside`.
+            let mut hit = |n: Vector3, c: f32, inside: &dyn Fn(Vector3) -> bool| {
+                let dn = n.dot(&ray);
+                if dn.abs() > 1e-6 {
+                    let t = (c - n.dot(&eye)) / dn;
+                    let p = eye + ray * t;
+                    if t > 0.0 && t < best && inside(p) {
+                        best = t;
+                    }
+                }
+            };
+            hit(section_n, 0.0, &|p| {
+                p.x.abs() < 0.45 && (0.0..=0.9).contains(&(p.y * cr + p.z * sr))
+            });
+            // The patient's back half lying on the section: a block 0.2 m thick.
+            hit(section_n, 0.2, &|p| {
+                p.x.abs() < 0.2 && (0.1..=0.7).contains(&(p.y * cr + p.z * sr))
+            });
+            hit(Vector3::z(), -0.15, &|p| {
+                p.x.abs() < 0.45 && (0.0..1.0).contains(&p.y)
+            });
+            hit(Vector3::z(), 0.0, &|p| {
+                p.x.abs() < 0.45 && (-0.04..0.0).contains(&p.y)
+            });
+            hit(Vector3::z(), -0.75, &|_| true);
+            best.is_finite().then_some(best)
+        });
+        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
+        let up = camera_from_world.rotation * Vector3::z();
+        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
+        assert!(
+            (bed.mattress.d - mattress.d).abs() < 0.02
+                && bed.mattress.normal().dot(&mattress.normal()) > 0.999,
+            "mattress {:?} against {mattress:?} (the base is 0.15 m lower)",
+            bed.mattress
+        );
+        let section = bed.head_section.expect("the raised section is found");
+        let deg = libm::acosf(section.normal().dot(&bed.mattress.normal()).min(1.0)).to_degrees();
+        assert!((deg - 35.0).abs() < 2.0, "section at {deg}°");
     }
 
     /// Points every 2 cm on a plate 0.5 m wide standing on the mattress z = 0 and rising `deg` toward +y from
