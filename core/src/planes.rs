@@ -176,6 +176,9 @@ const BASE_UNDER_SECTION_M: f32 = 0.03;
 /// The bed's base lies at least this far under the lowest visible part of a raised section, metres (a mattress's
 /// thickness less the few centimetres the section's bottom can lie below the mattress's top).
 const BASE_BELOW_SECTION_M: f32 = 0.08;
+/// ... and at most this far (a thick mattress, 20 cm, under a section whose lowest 15 cm the hips hide): farther
+/// down is the floor under the section (s4004, s8012 took the floor for the base), metres.
+const BASE_MAX_BELOW_SECTION_M: f32 = 0.35;
 /// A hospital mattress's thickness (12-20 cm; the synthetic beds 12-18 cm), metres: where the base under a raised
 /// section is all that shows of the bed, the mattress is taken this far above it.
 const NOMINAL_MATTRESS_THICKNESS_M: f32 = 0.15;
@@ -352,10 +355,15 @@ pub fn estimate_bed(
         bottom.as_ref().is_some_and(|b| {
             let section = &found[b.label as usize - 1].0;
             let candidate = &found[i];
-            // Only a section larger than the plane, rising from well above it and one flat surface tells (on a
-            // flat bed the arm's links and the patient's own surfaces make tilted planes over the mattress too).
+            // Only a section larger than the plane, rising from a mattress's thickness above it and one flat surface
+            // tells (on a flat bed the arm's links and the patient's own surfaces make tilted planes over the
+            // mattress too).
             if b.points <= candidate.1
-                || b.height_above(&candidate.0, points, labels) < BASE_BELOW_SECTION_M
+                || !(BASE_BELOW_SECTION_M..=BASE_MAX_BELOW_SECTION_M).contains(&b.height_above(
+                    &candidate.0,
+                    points,
+                    labels,
+                ))
                 || !one_surface(surface_agreement(frame, k, section, points, labels, b.label))
             {
                 return false;
