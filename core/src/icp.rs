@@ -51,13 +51,19 @@ impl IcpParams {
         }
     }
 
-    /// Whether an observed point (camera frame) is bed: less than `above_mattress_m` above the mattress or the
-    /// raised head section (the bed's surface is the higher of the two planes).
+    /// Whether an observed point (camera frame) is bed: less than `above_mattress_m` above the bed's surface.
     pub fn is_bed(&self, o: &Point3) -> bool {
-        self.mattress.signed_distance(o) < self.above_mattress_m
-            || self
-                .head_section
-                .is_some_and(|h| h.signed_distance(o) < self.above_mattress_m)
+        self.above_bed(o).0 < self.above_mattress_m
+    }
+
+    /// Height of `p` (camera frame) above the bed's surface, the higher of the mattress and the raised head section,
+    /// and that surface's normal.
+    pub fn above_bed(&self, p: &Point3) -> (f32, Vector3) {
+        let m = (self.mattress.signed_distance(p), self.mattress.normal());
+        match self.head_section {
+            Some(h) if h.signed_distance(p) < m.0 => (h.signed_distance(p), h.normal()),
+            _ => m,
+        }
     }
 }
 

@@ -13,8 +13,10 @@
 //! only what lies above it as well, and the bed's long axis runs up its slope. A patient on a raised section can hide
 //! the whole mattress: then a bed-wide tilted plane larger than the chosen mattress whose bottom lies well below it (an
 //! arm link's or the legs' flat top was chosen) or a bed's height above it (the floor was) places the mattress level
-//! through that bottom. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without either, the
-//! largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
+//! through that bottom; a level plane 8-35 cm under that bottom whose points lie under the section is the bed's base
+//! bared by it, never the mattress (the mattress then goes a nominal thickness above it). Up is the caller's (from
+//! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
+//! steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once). Telling
@@ -342,83 +344,61 @@ pub fn estimate_bed(
         (None, None) => found[0].0.normal(),
     };
     let cos_up = libm::cosf(HORIZONTAL_DEG.to_radians());
-    // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
-    // in depth layers a few centimetres apart, which may be found as planes of their own), and far enough from the
-    // camera for a patient lying on it to be seen (an arm link's flat top near the camera is not it).
     let bottom = section_bottom(points, labels, found, &up, floor.map(|(f, _)| f));
-    // A raised head section bares the bed's base under it: a level plane a mattress's thickness below the mattress,
-    // seen through the wedge between the section and the base, that can be all the camera sees level at a bed's
-    // height when the patient and the section hide the flat mattress (s13006, s13022: the base taken for the
-    // mattress 12-16 cm low, the section then refused). Its points lie under the section's plane; the flat
-    // mattress, on the other side of the hinge, lies above that plane's extension.
-    let under_section = |i: usize| {
-        bottom.as_ref().is_some_and(|b| {
-            let section = &found[b.label as usize - 1].0;
-            let candidate = &found[i];
-            // Only a section larger than the plane, rising from a mattress's thickness above it and one flat surface
-            // tells (on a flat bed the arm's links and the patient's own surfaces make tilted planes over the
-            // mattress too).
-            if b.points <= candidate.1
-                || !(BASE_BELOW_SECTION_M..=BASE_MAX_BELOW_SECTION_M).contains(&b.height_above(
-                    &candidate.0,
-                    points,
-                    labels,
-                ))
-                || !one_surface(surface_agreement(frame, k, section, points, labels, b.label))
-            {
-                return false;
-            }
-            let (under, all) = points
-                .iter()
-                .zip(labels.iter())
-                .filter(|(_, l)| **l == i as u8 + 1)
-                .fold((0u32, 0u32), |(u, a), (p, _)| {
-                    (
-                        u + u32::from(section.signed_distance(p) < -BASE_UNDER_SECTION_M),
-                        a + 1,
-                    )
-                });
-            all > 0 && under * 2 > all
-        })
-    };
     let level_at_bed_height = |p: &Plane| {
         p.normal().dot(&up) >= cos_up
             && floor.is_none_or(|(f, _)| bed_height(&f, p))
             && p.d >= MIN_MATTRESS_DISTANCE_M
     };
+    // A raised head section bares the bed's base under it: a level plane a mattress's thickness below the mattress,
+    // seen through the wedge between the section and the base, that can be all the camera sees level at a bed's
+    // height when the patient and the section hide the flat mattress (s13006, s13022: the base taken for the
+    // mattress 12-16 cm low, the section then refused). Its points lie under the section's plane; the flat
+    // mattress, on the other side of the hinge, lies above that plane's extension. Only a section larger than the
+    // plane, rising from a mattress's thickness above it and one flat surface tells (on a flat bed the arm's links
+    // and the patient's own surfaces make tilted planes over the mattress too). Judged once per plane.
+    let mut bared = [false; MAX_PLANES + 1];
+    if let Some(b) = &bottom {
+        let section = &found[b.label as usize - 1].0;
+        let mut flat = None;
+        for (i, (p, n)) in found.iter().enumerate() {
+            bared[i] = level_at_bed_height(p)
+                && b.points > *n
+                && (BASE_BELOW_SECTION_M..=BASE_MAX_BELOW_SECTION_M)
+                    .contains(&b.height_above(p, points, labels))
+                && *flat.get_or_insert_with(|| {
+                    one_surface(surface_agreement(frame, k, section, points, labels, b.label))
+                })
+                && mostly_under(section, points, labels, i as u8 + 1);
+        }
+    }
     let base = found
         .iter()
-        .enumerate()
-        .filter(|(i, (p, _))| level_at_bed_height(p) && under_section(*i))
-        .max_by(|a, b| a.1.0.d.total_cmp(&b.1.0.d))
-        .map(|(_, (p, _))| *p);
+        .zip(bared)
+        .filter(|(_, bared)| *bared)
+        .max_by(|a, b| a.0.0.d.total_cmp(&b.0.0.d))
+        .map(|((p, _), _)| *p);
+    // The mattress: the lowest horizontal plane a bed's height above the floor (far floors come out of the Kinect
+    // in depth layers a few centimetres apart, which may be found as planes of their own), and far enough from the
+    // camera for a patient lying on it to be seen (an arm link's flat top near the camera is not it); not the base.
     let chosen = found
         .iter()
-        .enumerate()
-        .filter(|(i, (p, _))| level_at_bed_height(p) && !under_section(*i))
-        .max_by(|a, b| a.1.0.d.total_cmp(&b.1.0.d))
-        .map(|(_, f)| *f);
+        .zip(bared)
+        .filter(|((p, _), bared)| level_at_bed_height(p) && !bared)
+        .max_by(|a, b| a.0.0.d.total_cmp(&b.0.0.d))
+        .map(|(f, _)| *f);
     // A patient on a raised head section can hide the whole mattress; then the flat top of an arm link, or the
     // floor, is taken for it. The section still shows: its lowest points lie on the mattress (within 1-3 cm on 11 of
     // 12 raised sections of the validation and diagnostic sequences), so a mattress far above or far below them is
     // replaced by the level plane through them; with the base in view, a typical mattress's thickness above the
     // base unless that is above the section's bottom (the hips can hide the hinge).
     let section_level = |b: &SectionBottom<'_>| {
-        let level = b.level(points, labels);
-        match base {
-            Some(base) => {
-                let on_base = Plane {
-                    normal: base.normal,
-                    d: base.d - NOMINAL_MATTRESS_THICKNESS_M,
-                };
-                if b.height_above(&on_base, points, labels) >= 0.0 {
-                    on_base
-                } else {
-                    level
-                }
-            }
-            None => level,
-        }
+        base.map(|base| Plane {
+            normal: base.normal,
+            d: base.d - NOMINAL_MATTRESS_THICKNESS_M,
+        })
+        .filter(|on_base| b.height_above(on_base, points, labels) >= 0.0)
+        .unwrap_or_else(|| b.level(points, labels))
     };
     let (mattress, mattress_n) = match (chosen, bottom) {
         (Some((m, n)), Some(b)) => {
@@ -748,6 +728,22 @@ fn spans_the_bed(
     let mean = sum / n;
     let var = (sq / n - mean * mean).max(0.0);
     libm::sqrt(var) >= SECTION_MIN_SPREAD_M as f64
+}
+
+/// Whether most of the points labelled `label` lie at least [`BASE_UNDER_SECTION_M`] under `section`.
+fn mostly_under(section: &Plane, points: &[Point3], labels: &[u8], label: u8) -> bool {
+    let (under, all) =
+        points
+            .iter()
+            .zip(labels)
+            .filter(|(_, l)| **l == label)
+            .fold((0u32, 0u32), |(u, a), (p, _)| {
+                (
+                    u + u32::from(section.signed_distance(p) < -BASE_UNDER_SECTION_M),
+                    a + 1,
+                )
+            });
+    all > 0 && under * 2 > all
 }
 
 /// Of the points labelled `label` (a plane's own inliers), how many had a local surface normal to test and how many

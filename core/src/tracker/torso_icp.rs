@@ -230,30 +230,29 @@ pub fn temporal_params(cfg: &TorsoIcpConfig, bed: &BedScene) -> IcpParams {
     }
 }
 
-/// Height of `p` above the bed's surface (the higher of the mattress and the raised head section) and that surface's
-/// normal.
-fn above_bed(p: &Point3, params: &IcpParams) -> (f32, Vector3) {
-    let m = (params.mattress.signed_distance(p), params.mattress.normal());
-    match params.head_section {
-        Some(h) if h.signed_distance(p) < m.0 => (h.signed_distance(p), h.normal()),
-        _ => m,
-    }
-}
-
-/// The lowest vertex of the torso's hip half (torso `y` under the middle of the model's extent) and of its shoulder
-/// half at `pose`: each one's height above the bed, position and the bed surface's normal there. Cost: two passes
-/// over the vertices (a transform and two plane distances each).
-fn lowest_halves(vertices: &[Point3], pose: &Isometry3, params: &IcpParams) -> [(f32, Point3, Vector3); 2] {
+/// The torso `y` that splits the model into its hip half and its shoulder half: the middle of its extent.
+fn mid_y(vertices: &[Point3]) -> f32 {
     let (lo, hi) = vertices
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), v| {
             (lo.min(v.y), hi.max(v.y))
         });
-    let mid = 0.5 * (lo + hi);
+    0.5 * (lo + hi)
+}
+
+/// The lowest vertex of the torso's hip half (torso `y` under `mid`) and of its shoulder half at `pose`: each one's
+/// height above the bed, position and the bed surface's normal there. Cost: one pass over the vertices (a transform
+/// and two plane distances each).
+fn lowest_halves(
+    vertices: &[Point3],
+    mid: f32,
+    pose: &Isometry3,
+    params: &IcpParams,
+) -> [(f32, Point3, Vector3); 2] {
     let mut lowest = [(f32::INFINITY, Point3::origin(), Vector3::zeros()); 2];
     for v in vertices {
         let p = pose * v;
-        let (h, n) = above_bed(&p, params);
+        let (h, n) = params.above_bed(&p);
         let half = &mut lowest[usize::from(v.y >= mid)];
         if h < half.0 {
             *half = (h, p, n);
@@ -262,11 +261,12 @@ fn lowest_halves(vertices: &[Point3], pose: &Isometry3, params: &IcpParams) -> [
     lowest
 }
 
-/// The back-on-the-bed row ([`TorsoIcpConfig::bed_pitch_weight`]) at `pose`: the shoulder half's lowest height
-/// above the bed less the hip half's, less the offset, brought within the tolerance. `None` when off or within it.
-/// Cost: [`lowest_halves`] per ICP iteration.
+/// The back-on-the-bed row ([`TorsoIcpConfig::bed_pitch_weight`]) at `pose`, the halves split at `mid`
+/// ([`mid_y`]): the shoulder half's lowest height above the bed less the hip half's, less the offset, brought within
+/// the tolerance. `None` when off or within it. Cost: [`lowest_halves`] per ICP iteration.
 fn bed_pitch_row(
     vertices: &[Point3],
+    mid: f32,
     pose: &Isometry3,
     params: &IcpParams,
     cfg: &TorsoIcpConfig,
@@ -274,7 +274,7 @@ fn bed_pitch_row(
     if cfg.bed_pitch_weight <= 0.0 || vertices.is_empty() {
         return None;
     }
-    let [(hh, ph, nh), (hs, ps, ns)] = lowest_halves(vertices, pose, params);
+    let [(hh, ph, nh), (hs, ps, ns)] = lowest_halves(vertices, mid, pose, params);
     let r = hs - hh - cfg.bed_pitch_offset_m;
     if libm::fabsf(r) <= cfg.bed_pitch_tolerance_m {
         return None;
@@ -314,6 +314,12 @@ pub fn fit_torso(
     let mut pose = start;
     let mut fit = TorsoFit::default();
     let mut slowest = 0u32;
+    // The model's halves do not change within a fit: split once, and only when the prior is on.
+    let mid = if cfg.bed_pitch_weight > 0.0 {
+        mid_y(vertices)
+    } else {
+        0.0
+    };
     for it in 0..budget.icp_iterations {
         let before = watch.elapsed(clock);
         if it >= min_iterations.max(1) && !iteration_fits(budget, before, slowest) {
@@ -329,7 +335,7 @@ pub fn fit_torso(
             &pose,
             params,
             cfg.huber_m,
-            bed_pitch_row(vertices, &pose, params, cfg).as_slice(),
+            bed_pitch_row(vertices, mid, &pose, params, cfg).as_slice(),
         );
         fit.iterations += 1;
         slowest = slowest.max(watch.elapsed(clock).saturating_sub(before));
@@ -399,14 +405,14 @@ mod tests {
         };
         let (v, flat) = box_torso(0.0);
         assert_eq!(
-            bed_pitch_row(&v, &flat, &params, &cfg),
+            bed_pitch_row(&v, mid_y(&v), &flat, &params, &cfg),
             None,
             "a flat back is within the tolerance"
         );
         // At 10° the hip half's lowest vertex is its back corner at y = 0, the shoulder half's is at y = 0.25:
         // 0.25 sin 10° = 43.4 mm higher, 33.4 mm beyond the tolerance.
         let (v, pitched) = box_torso(10.0);
-        let row = bed_pitch_row(&v, &pitched, &params, &cfg).expect("a pitched back is held");
+        let row = bed_pitch_row(&v, mid_y(&v), &pitched, &params, &cfg).expect("a pitched back is held");
         assert!(
             (row.r - (0.25 * 10f32.to_radians().sin() - 0.01)).abs() < 1e-5,
             "{row:?}"
@@ -417,7 +423,7 @@ mod tests {
             ..cfg
         };
         assert_eq!(
-            bed_pitch_row(&v, &pitched, &params, &off),
+            bed_pitch_row(&v, mid_y(&v), &pitched, &params, &off),
             None,
             "weight 0 is off"
         );
@@ -427,7 +433,7 @@ mod tests {
             crate::geometry::Translation3::new(step[3], step[4], step[5]),
             crate::geometry::UnitQuaternion::new(Vector3::new(step[0], step[1], step[2])),
         );
-        let moved = bed_pitch_row(&v, &(delta * pitched), &params, &cfg).expect("still held");
+        let moved = bed_pitch_row(&v, mid_y(&v), &(delta * pitched), &params, &cfg).expect("still held");
         let predicted = row.r + row.j.iter().zip(&step).map(|(j, s)| j * s).sum::<f32>();
         assert!(
             (moved.r - predicted).abs() < 2e-5,
@@ -436,7 +442,12 @@ mod tests {
         );
         // Pitched down into the bed the sign turns.
         let (v, down) = box_torso(-10.0);
-        assert!(bed_pitch_row(&v, &down, &params, &cfg).expect("held").r < 0.0);
+        assert!(
+            bed_pitch_row(&v, mid_y(&v), &down, &params, &cfg)
+                .expect("held")
+                .r
+                < 0.0
+        );
     }
 
     fn fit(pairs: usize, inliers: usize, occluded: usize, see_through: usize, no_depth: usize) -> TorsoFit {
