@@ -60,6 +60,11 @@ pub struct DatasetArgs {
     /// probes reach ±offset/depth px; a probe beyond the crop reads no depth where the head computer sees bed.
     #[arg(long, default_value_t = crate::dataset::CROP_MARGIN_PX)]
     pub crop_margin: u16,
+    /// Where views with the arm place it: `contact` (the probe on the torso, the robot's shoulder beside the bed) or
+    /// `sequence` (half of them as the tracking sequences hold the arm: the shoulder near the head, the probe on the
+    /// torso or lifted off it toward the head).
+    #[arg(long, value_enum, default_value_t = super::ArmPlacement::Contact)]
+    pub arm_placement: super::ArmPlacement,
     /// Replace an existing dataset in DIR.
     #[arg(long)]
     pub force: bool,
@@ -152,6 +157,7 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
         },
         view_distance_scale: args.view_distance_scale,
         crop_margin_px: args.crop_margin,
+        arm_placement: args.arm_placement,
     };
     let total = args.bodies as u64 * args.views as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());

@@ -77,6 +77,29 @@ pub struct DatasetConfig {
         skip_serializing_if = "is_default_crop_margin"
     )]
     pub crop_margin_px: u16,
+    /// Where the views that show the arm place it ([`ArmPlacement::Contact`] when absent).
+    #[serde(default, skip_serializing_if = "ArmPlacement::is_contact")]
+    pub arm_placement: ArmPlacement,
+}
+
+/// Where a dataset view's robot arm is.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum ArmPlacement {
+    /// The probe on the torso, the robot's shoulder from [`sample_shoulder`] (every dataset before this option).
+    #[default]
+    Contact,
+    /// Half the arm views as `Contact`, the other half as the tracking sequences hold the arm
+    /// ([`place_arm_as_sequences`]).
+    Sequence,
+}
+
+impl ArmPlacement {
+    fn is_contact(&self) -> bool {
+        *self == ArmPlacement::Contact
+    }
 }
 
 impl Default for DatasetConfig {
@@ -92,6 +115,7 @@ impl Default for DatasetConfig {
             noise: KinectNoise::default(),
             view_distance_scale: 1.0,
             crop_margin_px: CROP_MARGIN_PX,
+            arm_placement: ArmPlacement::Contact,
         }
     }
 }
@@ -326,14 +350,54 @@ pub fn place_arm(
     rng: &mut ChaCha8Rng,
 ) -> ArmState {
     let shoulder = sample_shoulder(scene, contact.x, rng);
-    // Tilt the probe up to ~15° off the surface normal, as a sonographer would.
+    reach_tilted(shoulder, contact, normal, eye, rng)
+}
+
+/// The arm from `shoulder` with the probe tip at `tip`, the probe tilted up to ~15° off the surface `normal`, as a
+/// sonographer holds it.
+fn reach_tilted(
+    shoulder: Vector3<f32>,
+    tip: Vector3<f32>,
+    normal: Vector3<f32>,
+    eye: Vector3<f32>,
+    rng: &mut ChaCha8Rng,
+) -> ArmState {
     let tilt = Vector3::new(rng.gen_range(-0.25..0.25), rng.gen_range(-0.25..0.25), 0.0);
     ArmState::reach(
         shoulder,
-        contact,
+        tip,
         -(normal + tilt).normalize(),
-        elbow_hint(shoulder, contact, eye),
+        elbow_hint(shoulder, tip, eye),
     )
+}
+
+/// How [`ArmPlacement::Sequence`] places the arm: half the time [`place_arm`]; otherwise as a tracking sequence with
+/// a full occlusion holds it. The shoulder is one of the eight best of
+/// [`crate::sequence::episodes::shoulders_for_full_occlusion`] (beside the bed near the head, so the arm crosses the
+/// head's view above the patient's shoulders), and the probe is on the torso at `contact` or, one time in two,
+/// lifted 5–45 cm off it toward the head, as on the way to the park pose and in it. [`place_arm`]'s arm where no
+/// such shoulder reaches the torso.
+pub fn place_arm_as_sequences(
+    scene: &Scene,
+    contact: Vector3<f32>,
+    normal: Vector3<f32>,
+    eye: Vector3<f32>,
+    rng: &mut ChaCha8Rng,
+) -> ArmState {
+    if rng.gen_bool(0.5) {
+        return place_arm(scene, contact, normal, eye, rng);
+    }
+    let shoulders = crate::sequence::episodes::shoulders_for_full_occlusion(scene, eye, rng.r#gen(), 8);
+    let Some(&shoulder) = shoulders.get(rng.gen_range(0..shoulders.len().max(1))) else {
+        return place_arm(scene, contact, normal, eye, rng);
+    };
+    let lift = if rng.gen_bool(0.5) {
+        rng.gen_range(0.05..0.45)
+    } else {
+        0.0
+    };
+    let tip = contact + (eye - contact).normalize() * lift;
+    reach_tilted(shoulder, tip, normal, eye, rng)
 }
 
 /// Salient points of the scene in the camera frame and in pixels.
@@ -403,7 +467,10 @@ pub fn generate_body(
         scene.arm = if with_arm {
             let (contact, normal) = torso_contact(&scene, &normals, &mut rng);
             let eye = cfw.inverse().translation.vector;
-            Some(place_arm(&scene, contact, normal, eye, &mut rng))
+            Some(match cfg.arm_placement {
+                ArmPlacement::Contact => place_arm(&scene, contact, normal, eye, &mut rng),
+                ArmPlacement::Sequence => place_arm_as_sequences(&scene, contact, normal, eye, &mut rng),
+            })
         } else {
             None
         };
@@ -937,6 +1004,67 @@ mod tests {
                 "0cb4dfb38f943cb31e4608252c65a349f2990a956418b7ea4d5f905017e42d86",
                 "70ab6ab8414ec3dfaa2bc749e942a3df53b16a3b5ab1297409906c551d28cef4",
             ]
+        );
+    }
+
+    #[test]
+    fn sequence_placement_puts_half_the_arms_where_the_sequences_hold_them() {
+        // Half the arms as `place_arm` (shoulder beside the bed 0.3-0.7 m along it from the contact, low; the probe
+        // on the torso); the others from a full-occlusion shoulder (within 0.5 m of the head along the bed), half of
+        // those with the probe lifted 5-45 cm toward the head.
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let patient = Mannequin::build(&Mannequin::sample_params(&mut rng));
+        let bed = BedParams::sample(&mut rng, 0.0, 0.0);
+        let scene = Scene::new(&patient.body, bed);
+        let view = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
+        let eye = view
+            .camera_from_world(scene.midline_y(), bed.mattress_top)
+            .inverse()
+            .translation
+            .vector;
+        let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
+        let (mut near_head, mut lifted, mut reached) = (0, 0, 0);
+        for _ in 0..200 {
+            let (contact, normal) = torso_contact(&scene, &normals, &mut rng);
+            let arm = place_arm_as_sequences(&scene, contact, normal, eye, &mut rng);
+            let s = Vector3::from(arm.shoulder);
+            let usual = (0.3 - 1e-4..=0.7 + 1e-4).contains(&(s.x - contact.x).abs())
+                && (bed.mattress_top + 0.1 - 1e-4..=bed.mattress_top + 0.35 + 1e-4).contains(&s.z);
+            if usual {
+                continue;
+            }
+            // The mannequin's usual arms often fall short of the torso; the near-head shoulders reach the sweep.
+            near_head += 1;
+            assert!((s.x - eye.x).abs() <= 0.5 + 1e-4, "shoulder {s:?}, head {eye:?}");
+            if !arm.reached {
+                continue;
+            }
+            reached += 1;
+            let off = arm.world_from_probe.translation.vector - contact;
+            if off.norm() > 0.01 {
+                lifted += 1;
+                assert!(
+                    (0.05 - 1e-3..0.45 + 1e-3).contains(&off.norm()),
+                    "lift {}",
+                    off.norm()
+                );
+                assert!(
+                    off.normalize().dot(&(eye - contact).normalize()) > 0.999,
+                    "lifted toward the head"
+                );
+            }
+        }
+        assert!(
+            (60..140).contains(&near_head),
+            "{near_head} of 200 shoulders outside the usual ones"
+        );
+        assert!(
+            reached * 10 >= near_head * 9,
+            "{reached} of {near_head} near-head arms reach"
+        );
+        assert!(
+            (reached / 4..reached * 3 / 4).contains(&lifted),
+            "{lifted} of {reached} lifted"
         );
     }
 
