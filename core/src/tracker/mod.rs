@@ -134,6 +134,12 @@ pub struct TrackerConfig {
     /// bed pins the back; but it helped on validation (torso 17.1 -> 16.2 mm) and hurt on held-out sequences (8.2 ->
     /// 9.7 mm), so it is not the default (docs/tracking.md).
     pub refit_bed_contact: Option<fit::BedContact>,
+    /// Eq. 7's λ (pull toward the mean body) in the lock refits: 0.01, a tenth of the shape evaluation's 0.1. From
+    /// a tracked pose the fit sees the chest and belly well, and 0.1 shrank what it found toward the mean body. On
+    /// the 46 validation sequences λ 0.1 / 0.03 / 0.01 / 0.003 / 0.001 gave a torso error of 14.8 / 13.0 / 12.9 /
+    /// 12.9 / 13.2 mm (medians 8.1 / 6.8 / 6.6 / 5.9 / 5.8) and a probe error of 12.7 / 11.2 / 11.2 / 11.3 / 11.4 mm;
+    /// at 0.01, 30 sequences gained more than 0.5 mm and 3 lost (docs/tracking.md, "Lock refits with a weaker pull").
+    pub refit_lambda: f32,
     /// Bed-plane search.
     pub planes: PlaneConfig,
     /// Up in the camera frame when known (from the calibration), for the bed search.
@@ -174,6 +180,7 @@ impl Default for TrackerConfig {
             lock_refits: 3,
             refit_min_visible: 0.5,
             refit_bed_contact: None,
+            refit_lambda: 0.01,
             planes: PlaneConfig::default(),
             up_camera: None,
             forest_samples: 0,
@@ -853,7 +860,10 @@ impl<'m, 's> Tracker<'m, 's> {
         // fitting (no pull toward the init estimate, only λ's toward the mean body): on the validation sequences
         // the init estimate is close to the mean and carries little, and holding the non-torso coefficients at it
         // left torso errors 1.4x as large (docs/tracking.md, "Shape refit on lock").
-        let params = FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed));
+        let params = FitParams {
+            lambda: self.cfg.refit_lambda,
+            ..FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed))
+        };
         let start = camera_from_torso * t.body_from_torso.inverse();
         let (points, normals) = (&mut *self.scratch.fit_points, &mut *self.scratch.fit_normals);
         let contact = self.cfg.refit_bed_contact.as_ref();

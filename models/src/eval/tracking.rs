@@ -67,6 +67,10 @@ pub struct TrackingEvalArgs {
     /// point held on the mattress).
     #[arg(long)]
     pub refit_bed_contact: bool,
+    /// The tracker's `refit_lambda`: Eq. 7's pull toward the mean body in the lock refits (default: the tracker's,
+    /// 0.01; 0.1 before 2026-12-03's sixth round).
+    #[arg(long)]
+    pub refit_lambda: Option<f32>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
     /// in fits from every start but the temporal one.
     #[arg(long)]
@@ -219,6 +223,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
+    }
+    if let Some(l) = args.refit_lambda {
+        cfg.refit_lambda = l;
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
