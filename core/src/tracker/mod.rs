@@ -1047,6 +1047,11 @@ impl<'m, 's> Tracker<'m, 's> {
             }
             let from_prior =
                 |i: usize| i == 0 && prior_pose.is_some() && variant == Variant::ForestIcpFeedback;
+            // The back-on-the-bed prior steers fits from the forest and the bed, not the temporal one.
+            let temporal_cfg = TorsoIcpConfig {
+                bed_pitch_weight: 0.0,
+                ..icp_cfg
+            };
             let min_support = match (prior_pose, self.support_ref) {
                 (Some(_), Some(r)) => icp_cfg.min_support.max(r - icp_cfg.support_drop),
                 _ => icp_cfg.min_support,
@@ -1054,14 +1059,10 @@ impl<'m, 's> Tracker<'m, 's> {
             // The best fit, and whether it moves the coasting pose (`TorsoIcpConfig::follow_occluded`).
             let mut best: Option<(Isometry3, TorsoFit, FitQuality, bool)> = None;
             for (i, start) in starts.iter().enumerate() {
-                // The back-on-the-bed prior steers fits from the forest and the bed, not the temporal one.
-                let cfg_i = if from_prior(i) {
-                    TorsoIcpConfig {
-                        bed_pitch_weight: 0.0,
-                        ..icp_cfg
-                    }
+                let (cfg_i, params_i) = if from_prior(i) {
+                    (&temporal_cfg, &temporal_params)
                 } else {
-                    icp_cfg
+                    (&icp_cfg, &acquire_params)
                 };
                 let (pose, fit) = torso_icp::fit_torso(
                     frame,
@@ -1069,12 +1070,8 @@ impl<'m, 's> Tracker<'m, 's> {
                     self.scratch.torso_vertices,
                     self.scratch.torso_normals,
                     *start,
-                    &cfg_i,
-                    if from_prior(i) {
-                        &temporal_params
-                    } else {
-                        &acquire_params
-                    },
+                    cfg_i,
+                    params_i,
                     &self.cfg.budget,
                     if prior_pose.is_none() {
                         icp_cfg.acquire_min_iterations
