@@ -27,7 +27,8 @@ use crate::wire::TrackerState;
 pub enum FitQuality {
     /// Enough of the torso seen and fitted well.
     Good,
-    /// Too little of the torso visible (the arm covers it): the pose coasts on the prior.
+    /// Too little of the torso visible (the arm covers it): the pose coasts on the prior, or follows a clean fit
+    /// near it (`TorsoIcpConfig::follow_occluded`).
     Occluded,
     /// No usable fit (no patient found, too few or too poor correspondences).
     Failed,

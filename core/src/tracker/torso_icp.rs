@@ -62,9 +62,11 @@ pub struct TorsoIcpConfig {
     /// bed and is at most `follow_m`/`follow_rad` from the last pose; such a fit from the temporal start ends the
     /// search over starts, and the state stays occluded (no shape refit, no reference support change). Otherwise the
     /// pose coasts where the last good fit left it, and a patient who rolls or shifts while their own arms hide 70-85
-    /// % of the torso drifts out from under it. Off by default:
-    /// with the true shape it cuts the validation torso error (14.1 -> 11.2 mm), with the estimated shape it is a
-    /// wash (partial views of a wrong shape pull the pose as much as they correct it; `docs/tracking.md`).
+    /// % of the torso drifts out from under it. On by default since 2026-12-03's seventh round, together with the
+    /// rotation hold ([`crate::tracker::TrackerConfig::occluded_hold_rotation`]): alone it was a wash with the
+    /// estimated shape (partial views of a wrong shape turn the pose a few degrees a frame); with the hold the 46
+    /// validation sequences' torso error fell 12.9 -> 11.3 mm and the probe error 11.2 -> 9.5 mm
+    /// (`docs/tracking.md`, "Following the occluded torso with its rotation held").
     pub follow_occluded: bool,
     /// Farthest an occluded fit may move the pose in one frame and still be followed, metres.
     pub follow_m: f32,
@@ -95,7 +97,16 @@ pub struct TorsoIcpConfig {
     /// error spread it (10th-90th percentile with the estimated shapes at true poses: -37 to -9 mm on val, -47 to +6
     /// on val2).
     pub bed_pitch_tolerance_m: f32,
+    /// Weight (per data pair, [`icp::PriorRow`]) that holds the fit's rotation at its start's, one row per axis
+    /// with the turn counted as the displacement it makes [`HOLD_LEVER_M`] from the axis: a Tikhonov prior that
+    /// leaves the directions the visible surface fixes to the data and keeps the ones it does not (a partial view
+    /// of a mostly hidden torso turns it by a few degrees a frame). 0 (off) here: the tracker sets it for the fit
+    /// from the temporal start while occluded ([`crate::tracker::TrackerConfig::occluded_hold_rotation`]).
+    pub hold_rotation_weight: f32,
 }
+
+/// Lever of [`TorsoIcpConfig::hold_rotation_weight`]'s rows, metres: about half the torso's width.
+pub const HOLD_LEVER_M: f32 = 0.1;
 
 impl Default for TorsoIcpConfig {
     fn default() -> Self {
@@ -116,7 +127,7 @@ impl Default for TorsoIcpConfig {
             acquire_min_pairs: 100,
             acquire_min_visible: 0.15,
             occluded_below: 0.7,
-            follow_occluded: false,
+            follow_occluded: true,
             follow_m: 0.06,
             follow_rad: 0.2,
             occluder_margin_m: 0.04,
@@ -125,6 +136,7 @@ impl Default for TorsoIcpConfig {
             bed_pitch_weight: 0.0,
             bed_pitch_offset_m: -0.025,
             bed_pitch_tolerance_m: 0.03,
+            hold_rotation_weight: 0.0,
         }
     }
 }
@@ -294,6 +306,24 @@ fn bed_pitch_row(
     })
 }
 
+/// The rows of [`TorsoIcpConfig::hold_rotation_weight`] at `pose`: the rotation from `start` to `pose` (camera
+/// frame), one row per axis; `None` when off.
+fn hold_rows(start: &Isometry3, pose: &Isometry3, cfg: &TorsoIcpConfig) -> Option<[icp::PriorRow; 3]> {
+    if cfg.hold_rotation_weight <= 0.0 {
+        return None;
+    }
+    let turn = (pose.rotation * start.rotation.inverse()).scaled_axis();
+    Some(core::array::from_fn(|k| {
+        let mut j = [0.0; 6];
+        j[k] = HOLD_LEVER_M;
+        icp::PriorRow {
+            j,
+            r: HOLD_LEVER_M * turn[k],
+            w: cfg.hold_rotation_weight,
+        }
+    }))
+}
+
 /// Register the torso model (`vertices`/`normals`, torso frame) to `frame` from `start`; returns the refined
 /// `camera_from_torso` (the start when no step could be taken) and what the fit did. The budget cuts iterations
 /// after the first `min_iterations`.
@@ -326,6 +356,14 @@ pub fn fit_torso(
             fit.cut = true;
             break;
         }
+        let mut rows: heapless::Vec<icp::PriorRow, 4> = heapless::Vec::new();
+        // Capacity 4: one back-on-the-bed row and three hold rows at most, so the pushes cannot fail.
+        if let Some(r) = bed_pitch_row(vertices, mid, &pose, params, cfg) {
+            let _ = rows.push(r);
+        }
+        for r in hold_rows(&start, &pose, cfg).iter().flatten() {
+            let _ = rows.push(*r);
+        }
         let step = icp::robust_point_to_plane_step(
             frame,
             k,
@@ -335,7 +373,7 @@ pub fn fit_torso(
             &pose,
             params,
             cfg.huber_m,
-            bed_pitch_row(vertices, mid, &pose, params, cfg).as_slice(),
+            &rows,
         );
         fit.iterations += 1;
         slowest = slowest.max(watch.elapsed(clock).saturating_sub(before));
@@ -450,6 +488,53 @@ mod tests {
         );
     }
 
+    #[test]
+    fn the_rotation_hold_measures_the_turn_from_the_start_and_its_jacobian_matches_a_small_step() {
+        use crate::geometry::{Translation3, UnitQuaternion};
+        let cfg = TorsoIcpConfig {
+            hold_rotation_weight: 0.3,
+            ..TorsoIcpConfig::default()
+        };
+        let start = Isometry3::from_parts(
+            Translation3::new(0.1, -0.2, 1.4),
+            UnitQuaternion::from_euler_angles(0.3, -0.2, 1.0),
+        );
+        assert_eq!(
+            hold_rows(&start, &start, &TorsoIcpConfig::default()),
+            None,
+            "off by default"
+        );
+        let at_start = hold_rows(&start, &start, &cfg).expect("on");
+        assert!(at_start.iter().all(|r| r.r == 0.0 && r.w == 0.3), "{at_start:?}");
+        // Turned 5° about the camera's x axis and shifted: only the turn counts, as lever times angle.
+        let turn = Isometry3::from_parts(
+            Translation3::new(0.03, 0.0, -0.02),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 5f32.to_radians()),
+        );
+        let pose = turn * start;
+        let rows = hold_rows(&start, &pose, &cfg).expect("on");
+        assert!(
+            (rows[0].r - HOLD_LEVER_M * 5f32.to_radians()).abs() < 1e-6,
+            "{rows:?}"
+        );
+        assert!(rows[1].r.abs() < 1e-6 && rows[2].r.abs() < 1e-6, "{rows:?}");
+        // A small step (rotation about an oblique axis, a translation) moves each residual by j·step.
+        let step = [0.004f32, -0.003, 0.002, 0.01, 0.02, -0.03];
+        let delta = Isometry3::from_parts(
+            Translation3::new(step[3], step[4], step[5]),
+            UnitQuaternion::new(Vector3::new(step[0], step[1], step[2])),
+        );
+        let moved = hold_rows(&start, &(delta * pose), &cfg).expect("on");
+        for (before, after) in rows.iter().zip(&moved) {
+            let predicted = before.r + before.j.iter().zip(&step).map(|(j, s)| j * s).sum::<f32>();
+            assert!(
+                (after.r - predicted).abs() < 2e-5,
+                "{} against {predicted}",
+                after.r
+            );
+        }
+    }
+
     fn fit(pairs: usize, inliers: usize, occluded: usize, see_through: usize, no_depth: usize) -> TorsoFit {
         let association = Association {
             pairs,
@@ -524,8 +609,12 @@ mod tests {
         let q = f.quality(&on, on.min_support, false);
         assert_eq!(q, FitQuality::Occluded);
         assert!(f.follows(&on, q, on.min_support, &prior, &near));
-        // Off (the default), it coasts.
-        assert!(!f.follows(&TorsoIcpConfig::default(), q, on.min_support, &prior, &near));
+        // Off, it coasts.
+        let off = TorsoIcpConfig {
+            follow_occluded: false,
+            ..on
+        };
+        assert!(!f.follows(&off, q, on.min_support, &prior, &near));
         // A jump of 10 cm or a turn of 20° is another local minimum.
         assert!(!f.follows(
             &on,

@@ -59,10 +59,15 @@ pub struct TrackingEvalArgs {
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
     pub search_shape_start: bool,
-    /// Turn on the tracker's `follow_occluded` (off by default): while the torso is mostly hidden, the pose follows
-    /// fits from the temporal start that pass the acquisition's floors instead of coasting.
+    /// The tracker's `follow_occluded` (default: the tracker's, on since 2026-12-03's seventh round): while the
+    /// torso is mostly hidden, the pose follows fits from the temporal start that pass the acquisition's floors
+    /// instead of coasting.
+    #[arg(long, value_name = "true|false")]
+    pub follow_occluded: Option<bool>,
+    /// The tracker's `occluded_hold_rotation` (default: the tracker's, 0.3): while occluded, the temporal fit's
+    /// rotation held at the last pose's, weight per data pair (0: off).
     #[arg(long)]
-    pub follow_occluded: bool,
+    pub hold_rotation: Option<f32>,
     /// The lock refits with the bed contact (the tracker's `refit_bed_contact`, off by default: the torso's lowest
     /// point held on the mattress).
     #[arg(long)]
@@ -214,12 +219,17 @@ pub fn run_variant(
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
     cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
     cfg.search_shape_start = args.search_shape_start;
-    cfg.icp.follow_occluded = args.follow_occluded;
+    if let Some(f) = args.follow_occluded {
+        cfg.icp.follow_occluded = f;
+    }
     if args.refit_bed_contact {
         cfg.refit_bed_contact = Some(supine_core::fit::BedContact::default());
     }
     if let Some(w) = args.bed_pitch_weight {
         cfg.icp.bed_pitch_weight = w;
+    }
+    if let Some(w) = args.hold_rotation {
+        cfg.occluded_hold_rotation = w;
     }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
