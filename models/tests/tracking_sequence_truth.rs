@@ -2,6 +2,7 @@
 //! hides over 90 % of the torso, the true torso surface is the body model's torso ICP subset, the sweeping probe
 //! rests 3 mm outside it, and the truth scores itself as zero. Seed 131 is used by no other test or tuning.
 
+use supine_core::wire::BodyRegion;
 use supine_models::eval::tracking_truth::TrackingTruth;
 use supine_models::scene::model_body::{BodyKind, open_source};
 use supine_models::sequence::episodes::{EpisodeFrames, MotionKind};
@@ -58,6 +59,13 @@ fn body_model_sequence_with_every_episode_has_consistent_truth() {
                 "frame {f}: the tip is {} m from the skin",
                 p.signed_distance_m
             );
+            // The truth scores itself as zero, and reports how far the tip hovers (the contact-range figure).
+            let e = t
+                .probe_error(p.nearest_camera, p.signed_distance_m, BodyRegion::OffBody, f)
+                .unwrap()
+                .expect("a scored frame");
+            assert!(e.position_mm < 1e-3 && e.signed_distance_mm < 1e-3, "{e:?}");
+            assert!((e.true_distance_mm - 3.0).abs() < 1.0, "{e:?}");
         }
     }
     assert!(on_skin >= 8, "{on_skin} sweep frames with the tip on the torso");

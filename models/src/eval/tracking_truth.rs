@@ -144,6 +144,8 @@ pub struct ProbeError {
     pub signed_distance_mm: f32,
     /// Whether the estimated region is the true one.
     pub region_correct: bool,
+    /// The true signed distance of the tip from the skin, mm (how far the probe hovers).
+    pub true_distance_mm: f32,
 }
 
 /// Everything a sequence directory holds as truth.
@@ -321,6 +323,7 @@ impl TrackingTruth {
             position_mm,
             signed_distance_mm,
             region_correct: region.name() == p.region,
+            true_distance_mm: p.signed_distance_m * 1000.0,
         }))
     }
 
