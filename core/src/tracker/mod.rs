@@ -147,8 +147,8 @@ pub struct TrackerConfig {
     /// followed pose ([`TorsoIcpConfig::follow_occluded`]) does not turn away a few degrees a frame. 0.3: on the 46
     /// validation sequences 0.1 / 0.3 / 1 gave a torso error of 11.2 / 11.3 / 11.0 mm and a probe error of 9.9 / 9.5
     /// / 10.0 mm, against 13.0 / 10.1 mm following without it (0.3: the lowest probe error, the torso error within
-    /// 0.3 mm of the lowest). Held while tracking too: 12.2 / 11.3 mm at 0.1 / 0.3,
-    /// probe 11.6 / 10.0 mm. Holding the translation too was worse (0.3: 12.1 mm): the patient shifts under the arm.
+    /// 0.3 mm of the lowest). Held while tracking too: 12.2 / 11.3 mm at 0.1 / 0.3, probe 11.6 / 10.0 mm. Holding the
+    /// translation too was worse (0.3: 12.1 mm): the patient shifts under the arm.
     pub occluded_hold_rotation: f32,
     /// Bed-plane search.
     pub planes: PlaneConfig,

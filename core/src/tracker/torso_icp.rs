@@ -309,7 +309,11 @@ fn bed_pitch_row(
 /// The rows of [`TorsoIcpConfig::hold_rotation_weight`] at `pose`: the rotation from `start` to `pose` (camera
 /// frame), one row per axis; `None` when off.
 fn hold_rows(start: &Isometry3, pose: &Isometry3, cfg: &TorsoIcpConfig) -> Option<[icp::PriorRow; 3]> {
-    if cfg.hold_rotation_weight <= 0.0 {
+    // Not positive (or NaN, from a bad config): off, never a NaN step.
+    if !matches!(
+        cfg.hold_rotation_weight.partial_cmp(&0.0),
+        Some(core::cmp::Ordering::Greater)
+    ) {
         return None;
     }
     let turn = (pose.rotation * start.rotation.inverse()).scaled_axis();
@@ -506,6 +510,11 @@ mod tests {
         );
         let at_start = hold_rows(&start, &start, &cfg).expect("on");
         assert!(at_start.iter().all(|r| r.r == 0.0 && r.w == 0.3), "{at_start:?}");
+        let nan = TorsoIcpConfig {
+            hold_rotation_weight: f32::NAN,
+            ..cfg
+        };
+        assert_eq!(hold_rows(&start, &start, &nan), None, "a NaN weight is off");
         // Turned 5° about the camera's x axis and shifted: only the turn counts, as lever times angle.
         let turn = Isometry3::from_parts(
             Translation3::new(0.03, 0.0, -0.02),

@@ -66,7 +66,7 @@ pub struct TrackingEvalArgs {
     pub follow_occluded: Option<bool>,
     /// The tracker's `occluded_hold_rotation` (default: the tracker's, 0.3): while occluded, the temporal fit's
     /// rotation held at the last pose's, weight per data pair (0: off).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_weight)]
     pub hold_rotation: Option<f32>,
     /// The lock refits with the bed contact (the tracker's `refit_bed_contact`, off by default: the torso's lowest
     /// point held on the mattress).
@@ -96,6 +96,13 @@ fn parse_budget_ms(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if v.is_finite() && (1.0..=60_000.0).contains(&v) => Ok(v),
         _ => Err(format!("`{s}` is not a budget in ms (1 to 60000)")),
+    }
+}
+
+fn parse_weight(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
+        _ => Err(format!("`{s}` is not a weight (a finite number, 0 or more)")),
     }
 }
 
