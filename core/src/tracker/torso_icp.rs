@@ -65,8 +65,9 @@ pub struct TorsoIcpConfig {
     /// % of the torso drifts out from under it. On by default since 2026-12-03's seventh round, together with the
     /// rotation hold ([`crate::tracker::TrackerConfig::occluded_hold_rotation`]): alone it was a wash with the
     /// estimated shape (partial views of a wrong shape turn the pose a few degrees a frame); with the hold the 46
-    /// validation sequences' torso error fell 12.9 -> 11.3 mm and the probe error 11.2 -> 9.5 mm
-    /// (`docs/tracking.md`, "Following the occluded torso with its rotation held").
+    /// validation sequences' torso error fell 12.9 -> 11.3 mm and the probe error 11.2 -> 9.5 mm. On two fresh
+    /// held-out sets it was mixed: 17001-17024 12.6 -> 11.9 mm (probe 12.8 -> 11.7), 18001-18024 11.8 -> 13.1 mm
+    /// (probe 11.6 -> 12.0) (`docs/tracking.md`, "Following the occluded torso with its rotation held").
     pub follow_occluded: bool,
     /// Farthest an occluded fit may move the pose in one frame and still be followed, metres.
     pub follow_m: f32,

@@ -86,6 +86,14 @@ pub struct TrackingEvalArgs {
     /// The tracker's `refit_min_visible`: a lock refit waits for a fit that sees this share of the torso.
     #[arg(long, value_parser = parse_visible_share)]
     pub refit_min_visible: Option<f32>,
+    /// The tracker's `refit_late_frames`: frames with a pose after which waiting lock refits take the late gate
+    /// (default: the tracker's, 30; 0: never).
+    #[arg(long)]
+    pub refit_late_frames: Option<u16>,
+    /// The tracker's `refit_late_min_visible`: the lock refits' visibility gate after `refit_late_frames` (default:
+    /// the tracker's, 0.4).
+    #[arg(long, value_parser = parse_visible_share)]
+    pub refit_late_min_visible: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -252,6 +260,12 @@ pub fn run_variant(
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
+    }
+    if let Some(n) = args.refit_late_frames {
+        cfg.refit_late_frames = n;
+    }
+    if let Some(v) = args.refit_late_min_visible {
+        cfg.refit_late_min_visible = v;
     }
     if args.true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
