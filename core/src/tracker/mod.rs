@@ -1212,12 +1212,11 @@ impl<'m, 's> Tracker<'m, 's> {
         if self.init.refits_left > 0 {
             self.init.waited = self.init.waited.saturating_add(1);
         }
-        let refit_gate = refit_gate(&self.cfg, self.init.waited);
         if quality == FitQuality::Good
             && variant != Variant::Forest
             && self.init.refits_left > 0
             && self.machine.state() == TrackerState::Tracking
-            && report.fit.visible >= refit_gate
+            && report.fit.visible >= refit_gate(&self.cfg, self.init.waited)
             && let Some(pose) = self.pose
         {
             self.refit_on_lock(frame, &t, pose, clock, watch);

@@ -1012,16 +1012,9 @@ mod tests {
         // Half the arms as `place_arm` (shoulder beside the bed 0.3-0.7 m along it from the contact, low; the probe
         // on the torso); the others from a full-occlusion shoulder (within 0.5 m of the head along the bed), half of
         // those with the probe lifted 5-45 cm toward the head.
-        let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let patient = Mannequin::build(&Mannequin::sample_params(&mut rng));
-        let bed = BedParams::sample(&mut rng, 0.0, 0.0);
-        let scene = Scene::new(&patient.body, bed);
-        let view = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
-        let eye = view
-            .camera_from_world(scene.midline_y(), bed.mattress_top)
-            .inverse()
-            .translation
-            .vector;
+        let (scene, cfw, mut rng) = crate::scene::mannequin_scene(4);
+        let bed = scene.bed;
+        let eye = cfw.inverse().translation.vector;
         let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
         let (mut near_head, mut lifted, mut reached) = (0, 0, 0);
         for _ in 0..200 {

@@ -74,11 +74,11 @@ pub struct TrackingEvalArgs {
     pub refit_bed_contact: bool,
     /// The tracker's `refit_lambda`: Eq. 7's pull toward the mean body in the lock refits (default: the tracker's,
     /// 0.01; 0.1 before 2026-12-03's sixth round).
-    #[arg(long)]
+    #[arg(long, value_parser = parse_weight)]
     pub refit_lambda: Option<f32>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
     /// in fits from every start but the temporal one.
-    #[arg(long)]
+    #[arg(long, value_parser = parse_weight)]
     pub bed_pitch_weight: Option<f32>,
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]

@@ -321,6 +321,20 @@ pub fn arm_draw(m: &TriMesh) -> DrawMesh<'_> {
     mesh(m, Label::Occluder)
 }
 
+/// Test fixture: a sampled mannequin on a sampled bed seen from a nominal view, drawn from `seed` in that order. The
+/// scene, the view's `camera_from_world` and the rng after those draws.
+#[cfg(test)]
+pub(crate) fn mannequin_scene(seed: u64) -> (Scene, Isometry3<f32>, ChaCha8Rng) {
+    use rand_chacha::rand_core::SeedableRng;
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let patient = body::Mannequin::build(&body::Mannequin::sample_params(&mut rng));
+    let bed = BedParams::sample(&mut rng, 0.0, 0.0);
+    let scene = Scene::new(&patient.body, bed);
+    let view = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
+    let cfw = view.camera_from_world(scene.midline_y(), bed.mattress_top);
+    (scene, cfw, rng)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -639,12 +639,7 @@ mod tests {
 
     #[test]
     fn the_shoulder_is_the_first_whose_sweep_hides_at_most_the_limit() {
-        let mut rng = ChaCha8Rng::seed_from_u64(3);
-        let patient = Mannequin::build(&Mannequin::sample_params(&mut rng));
-        let bed = BedParams::sample(&mut rng, 0.0, 0.0);
-        let scene = Scene::new(&patient.body, bed);
-        let view = ViewParams::sample_nominal(&mut rng, scene.torso_centre());
-        let cfw = view.camera_from_world(scene.midline_y(), bed.mattress_top);
+        let (scene, cfw, mut rng) = crate::scene::mannequin_scene(3);
         let eye = cfw.inverse().translation.vector;
         let torso: Vec<u8> = MANNEQUIN_PARTS
             .iter()
