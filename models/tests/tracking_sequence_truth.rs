@@ -1,6 +1,7 @@
 //! A short tracking sequence of the statistical body with the sweep, the full occlusion and a shift: the parked arm
 //! hides over 90 % of the torso, the true torso surface is the body model's torso ICP subset, the sweeping probe
-//! rests 3 mm outside it, and the truth scores itself as zero. Seed 131 is used by no other test or tuning.
+//! rests 3 mm outside it, the truth scores itself as zero, and the rigid floor is zero for the true torso moved
+//! rigidly and the error in place for a shrunk one. Seed 131 is used by no other test or tuning.
 
 use supine_core::wire::BodyRegion;
 use supine_models::eval::tracking_truth::TrackingTruth;
@@ -47,6 +48,31 @@ fn body_model_sequence_with_every_episode_has_consistent_truth() {
     for f in 0..20u32 {
         let v = t.torso.frame(f as usize).unwrap();
         assert!(t.torso_surface_error_mm(v, f).unwrap() < 1e-3);
+        // The rigid floor: nothing for the true torso moved anywhere rigidly; for a torso 4 % smaller about its
+        // centroid, whose best rigid pose is where it stands, its error there.
+        let pose = nalgebra::Isometry3::new(
+            nalgebra::Vector3::new(0.3, -0.2, 0.5),
+            nalgebra::Vector3::new(0.2, -0.4, 1.1),
+        );
+        let moved: Vec<_> = v.iter().map(|p| pose * nalgebra::Point3::from(*p)).collect();
+        let floor = t.rigid_floor_mm(&moved, f).unwrap().unwrap();
+        assert!(floor < 0.05, "frame {f}: floor {floor} mm of the true torso");
+        let c = v
+            .iter()
+            .fold(nalgebra::Vector3::zeros(), |c, p| c + nalgebra::Vector3::from(*p))
+            / v.len() as f32;
+        let smaller: Vec<_> = v
+            .iter()
+            .map(|p| nalgebra::Point3::from(c + (nalgebra::Vector3::from(*p) - c) * 0.96))
+            .collect();
+        let floor = t.rigid_floor_mm(&smaller, f).unwrap().unwrap();
+        let flat: Vec<[f32; 3]> = smaller.iter().map(|p| p.coords.into()).collect();
+        let here = t.torso_surface_error_mm(&flat, f).unwrap();
+        assert!(
+            here > 0.5 && (floor - here).abs() < 0.05,
+            "frame {f}: floor {floor} mm, in place {here} mm"
+        );
+        assert_eq!(t.rigid_floor_mm(&smaller[1..], f).unwrap(), None);
         let sweeping = f < o.approach_start || f >= o.leave_end;
         if let Some(p) = t.frames[f as usize]
             .probe_truth

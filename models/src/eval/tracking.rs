@@ -7,6 +7,9 @@
 //!   surface of the frame (`torso.bin`), mm; salient-point error; probe mapping: the arm's own state stream
 //!   (`arm.cobs`: latency, encoder noise) mapped through the tracked pose onto the tracked model, against the
 //!   probe truth of the frame (nearest point and signed distance), where the tip is near the body.
+//! - rigid floor (`torso_floor_mm_mean`): the same torso error for the tracked model at its best rigid pose (Kabsch
+//!   to the true posed torso): what the model's shape and the true body's posture leave; the torso error above it
+//!   is the tracked pose's.
 //! - Sequences without `torso.bin` (the committed demo, older ones) are scored as `supine_core::tracker::accuracy`
 //!   does: vertex to vertex against the body model shaped with the true coefficients at the true torso pose.
 //! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm.
@@ -179,6 +182,9 @@ pub struct FrameScore {
     pub state: String,
     /// Torso surface error, mm (frames with a pose).
     pub torso_mm: Option<f32>,
+    /// Torso surface error of the same model at its best rigid pose, mm (frames with a pose): what no pose of this
+    /// shape, rigid and in the rest posture, can beat ([`TrackingTruth::rigid_floor_mm`]).
+    pub torso_floor_mm: Option<f32>,
     /// Salient-point error, mm.
     pub point_mm: Option<f32>,
     /// Probe nearest-point error, mm.
@@ -355,6 +361,7 @@ pub fn run_variant(
                 .map(|v| (pose * v).coords.into())
                 .collect();
             s.torso_mm = Some(tt.torso_surface_error_mm(&estimated, i as u32)?);
+            s.torso_floor_mm = tt.rigid_floor_mm(surface.vertices(), i as u32)?;
             if let Some(p) = r.salient_camera {
                 s.point_mm = Some(tt.point_error_mm(&p.map(|q| q.coords.into()), i as u32)?.mean_mm);
             }
@@ -409,6 +416,7 @@ pub fn run_variant(
         "init_frames": init_frames,
         "tracked_fraction": if after_init.is_empty() { 0.0 } else { tracked as f32 / after_init.len() as f32 },
         "torso_surface_error_mm_mean": mean(scores.iter().filter_map(|s| s.torso_mm)),
+        "torso_floor_mm_mean": mean(scores.iter().filter_map(|s| s.torso_floor_mm)),
         "point_error_mm_mean": mean(scores.iter().filter_map(|s| s.point_mm)),
         "probe_error_mm_mean": mean(scores.iter().filter_map(|s| s.probe_mm)),
         "probe_distance_error_mm_mean": mean(scores.iter().filter_map(|s| s.probe_distance_mm)),
@@ -484,6 +492,7 @@ fn combine(summaries: &[Value]) -> Value {
         "frames": summaries.iter().map(|s| s["frames"].as_u64().unwrap_or(0)).sum::<u64>(),
         "tracked_fraction": num("tracked_fraction"),
         "torso_surface_error_mm_mean": num("torso_surface_error_mm_mean"),
+        "torso_floor_mm_mean": num("torso_floor_mm_mean"),
         "point_error_mm_mean": num("point_error_mm_mean"),
         "probe_error_mm_mean": num("probe_error_mm_mean"),
         "probe_distance_error_mm_mean": num("probe_distance_error_mm_mean"),
@@ -526,13 +535,15 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         for (variant, acc) in per_variant.iter_mut() {
             let (scores, summary) = run_variant(&models, &seq, *variant, &truth_torso, args)?;
             eprintln!(
-                "{}  {:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm  p50 {:.2} ms",
+                "{}  {:<20} tracked {:.3}  torso {:>6.1} mm (floor {:.1})  points {:>6.1} mm  probe {:>6.1} mm  \
+                 p50 {:.2} ms",
                 dir.file_name().unwrap_or_default().to_string_lossy(),
                 variant.name(),
                 summary["tracked_fraction"].as_f64().unwrap_or(0.0),
                 summary["torso_surface_error_mm_mean"]
                     .as_f64()
                     .unwrap_or(f64::NAN),
+                summary["torso_floor_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 summary["point_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 summary["probe_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
                 summary["latency_ms_p50"].as_f64().unwrap_or(f64::NAN),
@@ -561,11 +572,12 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
     for (variant, _) in &per_variant {
         let r = &report[variant.name()];
         println!(
-            "{:<20} tracked {:.3}  torso {:>6.1} mm  points {:>6.1} mm  probe {:>6.1} mm ({:.1} mm distance, \
-             {:.1} mm in contact range)  recovery {}  p50 {:.2} ms  p99 {:.2} ms",
+            "{:<20} tracked {:.3}  torso {:>6.1} mm (rigid floor {:.1} mm)  points {:>6.1} mm  probe {:>6.1} mm \
+             ({:.1} mm distance, {:.1} mm in contact range)  recovery {}  p50 {:.2} ms  p99 {:.2} ms",
             variant.name(),
             r["tracked_fraction"].as_f64().unwrap_or(0.0),
             r["torso_surface_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
+            r["torso_floor_mm_mean"].as_f64().unwrap_or(f64::NAN),
             r["point_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
             r["probe_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
             r["probe_distance_error_mm_mean"].as_f64().unwrap_or(f64::NAN),

@@ -1,4 +1,5 @@
-//! The tracking evaluation's plot over time, one PNG per sequence: torso surface error per variant (top), the
+//! The tracking evaluation's plot over time, one PNG per sequence: torso surface error per variant and the last
+//! variant's rigid floor (top, a thin black line: the error its model would have at the best rigid pose), the
 //! state of each variant as a coloured band (middle), the true occluded fraction of the torso (bottom). Drawn with
 //! the evaluation charts' raster (no plotting dependency); a few ms per plot.
 
@@ -50,6 +51,11 @@ pub fn write_png(path: &Path, name: &str, runs: &[(Variant, Vec<FrameScore>)]) -
         c.text(lx + 20, 41, v.name(), 1, [0, 0, 0]);
         lx += 20 + text_w(v.name(), 1) + 30;
     }
+    if let Some((v, _)) = runs.last() {
+        let label = format!("RIGID FLOOR OF {}", v.name());
+        c.rect(lx, 44, lx + 14, 46, [0, 0, 0]);
+        c.text(lx + 20, 41, &label, 1, [0, 0, 0]);
+    }
     // Error panel with a grid every 10 mm.
     for k in 0..=6 {
         let y = err_top + err_h - k * err_h / 6;
@@ -63,6 +69,14 @@ pub fn write_png(path: &Path, name: &str, runs: &[(Variant, Vec<FrameScore>)]) -
                 let y = err_top + err_h - ((e / ERROR_MAX_MM).clamp(0.0, 1.0) * err_h as f32) as usize;
                 let x = x_of(i);
                 c.rect(x, y.saturating_sub(1), (x_of(i + 1)).max(x + 2), y + 2, col);
+            }
+        }
+    }
+    if let Some((_, scores)) = runs.last() {
+        for (i, s) in scores.iter().enumerate() {
+            if let Some(e) = s.torso_floor_mm {
+                let y = err_top + err_h - ((e / ERROR_MAX_MM).clamp(0.0, 1.0) * err_h as f32) as usize;
+                c.rect(x_of(i), y, x_of(i + 1).max(x_of(i) + 1), y + 1, [0, 0, 0]);
             }
         }
     }

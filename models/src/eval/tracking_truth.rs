@@ -17,6 +17,7 @@ use anyhow::{Context, Result, bail, ensure};
 use nalgebra::{Isometry3, Point3, Vector3};
 use std::path::{Path, PathBuf};
 use supine_core::calib::ArmSample;
+use supine_core::calib::solve::{Pair, kabsch};
 use supine_core::probe::ProbeMapping;
 use supine_core::salient::SalientPoint;
 use supine_core::wire::BodyRegion;
@@ -268,6 +269,30 @@ impl TrackingTruth {
             sum += near.distance as f64;
         }
         Ok((sum / estimated_camera.len() as f64 * 1000.0) as f32)
+    }
+
+    /// The torso surface error (mm) of `model` (torso vertices in any frame, the truth's vertices in its order) at
+    /// the rigid pose that best fits it to frame `f`'s true posed torso, vertex for vertex (Kabsch): the error left
+    /// by the model's shape and by the posture of the true body (the spine's bend and twist, the neck), which no
+    /// rigid pose removes. A tracker's torso error above it is its pose's. `None` when the counts differ.
+    pub fn rigid_floor_mm(&self, model: &[Point3<f32>], f: u32) -> Result<Option<f32>> {
+        let posed = self.torso.frame(f as usize).context("torso frame missing")?;
+        if posed.len() != model.len() {
+            return Ok(None);
+        }
+        let pairs: Vec<Pair> = model
+            .iter()
+            .zip(posed)
+            .map(|(m, p)| Pair {
+                robot_base: Point3::from(*p),
+                camera: *m,
+            })
+            .collect();
+        let Some(best) = kabsch(&pairs, |_| 1.0) else {
+            return Ok(None);
+        };
+        let aligned: Vec<[f32; 3]> = model.iter().map(|v| (best * v).coords.into()).collect();
+        self.torso_surface_error_mm(&aligned, f).map(Some)
     }
 
     /// Salient-point error of frame `f` for estimated points in the camera frame (metres, [`SalientPoint`] order).
