@@ -86,6 +86,14 @@ pub struct TrackingEvalArgs {
     /// The tracker's `lock_refits`: shape refits on the first tracked frames (default: the tracker's, 3; 0: off).
     #[arg(long)]
     pub lock_refits: Option<u8>,
+    /// The tracker's `refit_rounds`: further rounds of lock refits once the tracker has settled with a round's
+    /// shape (default: the tracker's, 2; 0: one round).
+    #[arg(long)]
+    pub refit_rounds: Option<u8>,
+    /// The tracker's `refit_settle_frames`: consecutive good tracked frames a further round waits for (default:
+    /// the tracker's, 10).
+    #[arg(long)]
+    pub refit_settle_frames: Option<u16>,
     /// The tracker's `refit_min_visible`: a lock refit waits for a fit that sees this share of the torso.
     #[arg(long, value_parser = parse_visible_share)]
     pub refit_min_visible: Option<f32>,
@@ -266,6 +274,12 @@ pub fn run_variant(
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
+    }
+    if let Some(n) = args.refit_rounds {
+        cfg.refit_rounds = n;
+    }
+    if let Some(n) = args.refit_settle_frames {
+        cfg.refit_settle_frames = n;
     }
     if let Some(n) = args.refit_late_frames {
         cfg.refit_late_frames = n;
