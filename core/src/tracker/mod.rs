@@ -904,8 +904,8 @@ impl<'m, 's> Tracker<'m, 's> {
 
     /// One lock refit: Eq. 7 (with the bed contact, when configured) from the tracked pose `camera_from_torso` and
     /// the tracked shape; after the last one of a round the refits' mean shape becomes the torso model (a new shape
-    /// revision), the pose moves to the last refit's, and the next round, if any, waits for the tracker to settle. A refit that fails still counts; one that does not fit in
-    /// the budget waits for the next frame.
+    /// revision), the pose moves to the last refit's, and the next round, if any, waits for the tracker to settle.
+    /// A refit that fails still counts; one that does not fit in the budget waits for the next frame.
     fn refit_on_lock(
         &mut self,
         frame: &DepthFrame<'_>,

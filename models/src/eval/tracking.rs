@@ -549,7 +549,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         for (variant, acc) in per_variant.iter_mut() {
             let (scores, summary) = run_variant(&models, &seq, *variant, &truth_torso, args)?;
             eprintln!(
-                "{}  {:<20} tracked {:.3}  torso {:>6.1} mm (floor {:.1})  points {:>6.1} mm  probe {:>6.1} mm  \
+                "{}  {:<20} tracked {:.3}  torso {:>6.1} mm (rigid floor {:.1})  points {:>6.1} mm  probe {:>6.1} mm  \
                  p50 {:.2} ms",
                 dir.file_name().unwrap_or_default().to_string_lossy(),
                 variant.name(),
