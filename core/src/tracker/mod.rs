@@ -952,7 +952,8 @@ impl<'m, 's> Tracker<'m, 's> {
         self.last_good_pose = self.pose;
         // The support a right fit reaches depends on the shape: measure it afresh.
         self.support_ref = None;
-        // The next round starts from this shape once the tracker has settled with it.
+        // The next round starts from this shape once the tracker has settled with it. `waited` runs on, so a round
+        // that starts after `refit_late_frames` takes the late visibility gate at once (as measured).
         if self.init.round < self.cfg.refit_rounds {
             self.init.round += 1;
             self.init.refits_left = self.cfg.lock_refits;
