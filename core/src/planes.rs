@@ -593,16 +593,24 @@ struct SectionBottom<'a> {
 
 /// Share of a section's own points below its bottom (the hinge region beside the hips; the rest hides it).
 const SECTION_BOTTOM_SHARE: f32 = 0.01;
+/// A section's points below an empty stretch this high are not the section's but the floor's strip where the
+/// section's plane crosses it, when the floor was not found as a plane of its own (s20022: 72 points of 1070, the
+/// section missed or the mattress placed on the floor), metres. The floor lies at least
+/// [`FLOOR_TO_MATTRESS_M`]`.0` below the mattress, and a section's own points run up from the hinge without such a
+/// gap: the arm hides at most a band of it a few decimetres long, which at a 20-70° raise is less than this high.
+const SECTION_GAP_M: f32 = 0.3;
+/// ... and only while they are at most this share of its points.
+const SECTION_STRIP_MAX_SHARE: f32 = 0.2;
 
 impl SectionBottom<'_> {
     /// The height above `plane` under which [`SECTION_BOTTOM_SHARE`] of the section's points lie, metres.
     fn height_above(&self, plane: &Plane, points: &[Point3], labels: &[u8]) -> f32 {
         // Not the strip of the floor where the section's plane crosses it, half a metre below the section.
-        let floor = |h: &Plane| self.floor == Some(*h);
+        let floor = |h: &Plane| (self.floor == Some(*h)).then_some(FLOOR_STRIP_M);
         let own = || {
             section_points(points, labels, self.label, self.found, &floor).map(|p| plane.signed_distance(p))
         };
-        low_quantile(own, SECTION_BOTTOM_SHARE)
+        low_quantile(own, SECTION_BOTTOM_SHARE, SECTION_GAP_M)
     }
 
     /// The level plane (normal `up`) through the section's bottom.
@@ -649,14 +657,14 @@ fn section_bottom<'a>(
 }
 
 /// The points labelled `label` (a tilted plane's inliers) that lie on none of the planes in `found` that `strip`
-/// picks: where a tilted plane crosses the floor or the mattress, a strip of their points is within its inlier band
-/// too.
+/// picks, within the half-width it gives: where a tilted plane crosses the floor or the mattress, a strip of their
+/// points is within its inlier band too.
 fn section_points<'a>(
     points: &'a [Point3],
     labels: &'a [u8],
     label: u8,
     found: &'a [(Plane, usize)],
-    strip: &'a dyn Fn(&Plane) -> bool,
+    strip: &'a dyn Fn(&Plane) -> Option<f32>,
 ) -> impl Iterator<Item = &'a Point3> + 'a {
     points
         .iter()
@@ -666,16 +674,25 @@ fn section_points<'a>(
         .filter(move |p| {
             !found
                 .iter()
-                .any(|(h, _)| strip(h) && libm::fabsf(h.signed_distance(p)) < LEVEL_STRIP_M)
+                .any(|(h, _)| strip(h).is_some_and(|half| libm::fabsf(h.signed_distance(p)) < half))
         })
 }
 
 /// Half-width of the strip of a level plane's points that a tilted plane's inlier band takes in where the two cross,
 /// metres (the search's inlier distance and a little).
 const LEVEL_STRIP_M: f32 = 0.015;
+/// The same for the floor, which lies too far for [`LEVEL_STRIP_M`]: the Kinect returns a far floor in depth layers a
+/// few centimetres apart, so the floor points in a section's inlier band lay up to 32 mm off the floor's fitted plane
+/// on s19019 (37 points of 1413, more than [`SECTION_BOTTOM_SHARE`]: the bottom, and so the mattress, went to the
+/// floor). Narrower than [`BASE_BELOW_SECTION_M`]: the plane taken for the floor can be the bed's base when the
+/// floor is out of view (s403: the section's bottom 113 mm above it; a strip of 0.2 m put the mattress 80 mm high).
+const FLOOR_STRIP_M: f32 = 0.05;
 
-/// The value under which `share` of the values `own` yields lie (1 cm bins over their range; 0 when none).
-fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32) -> f32 {
+/// The value under which `share` of the values `own` yields lie (1 cm bins over their range; 0 when none), but
+/// above the lowest values when an empty stretch at least `gap` long separates them from the rest and they are at
+/// most [`SECTION_STRIP_MAX_SHARE`] of all. Those still count toward `share`: [`SECTION_BOTTOM_SHARE`] was set with
+/// them in, and counting only the rest put s4004's mattress 16 mm high (few points show near its hinge).
+fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32, gap: f32) -> f32 {
     const BINS: usize = 256;
     let (lo, hi, n) = own().fold((f32::INFINITY, f32::NEG_INFINITY, 0u32), |(lo, hi, n), x| {
         (lo.min(x), hi.max(x), n + 1)
@@ -688,7 +705,19 @@ fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32) -> f32
     for x in own() {
         hist[(((x - lo) / bin) as usize).min(BINS - 1)] += 1;
     }
-    let want = (libm::ceilf(share * n as f32) as u32).max(1);
+    let (mut dropped, mut below, mut empty) = (0u32, 0u32, 0.0f32);
+    for &c in &hist {
+        if c == 0 {
+            empty += bin;
+            continue;
+        }
+        if empty >= gap && below as f32 <= SECTION_STRIP_MAX_SHARE * n as f32 {
+            dropped = below;
+        }
+        empty = 0.0;
+        below += c;
+    }
+    let want = (libm::ceilf(share * n as f32) as u32).max(dropped + 1);
     let mut seen = 0;
     for (i, c) in hist.iter().enumerate() {
         seen += c;
@@ -715,7 +744,7 @@ fn spans_the_bed(
     };
     let (mut n, mut sum, mut sq) = (0.0f64, 0.0f64, 0.0f64);
     let cos_flat = libm::cosf(HORIZONTAL_DEG.to_radians());
-    let level = |h: &Plane| h.normal().dot(up) >= cos_flat;
+    let level = |h: &Plane| (h.normal().dot(up) >= cos_flat).then_some(LEVEL_STRIP_M);
     for p in section_points(points, labels, label, found, &level) {
         let x = hinge.dot(&p.coords) as f64;
         n += 1.0;
@@ -1303,6 +1332,58 @@ mod tests {
             .collect();
         let pd = Plane::through(Vector3::new(0.0, -0.3 * 0.766 / 0.643, -0.3), pd.normal());
         assert!(!rises_from_the_hinge(&pd, &deep, &mattress, &cfg));
+    }
+
+    #[test]
+    fn a_sections_bottom_is_at_the_hinge_whatever_strip_of_the_floor_its_band_takes_in() {
+        // A section raised 30° from the hinge at the mattress (z = 0), and where its plane crosses a level surface
+        // `below` the mattress, that surface's points in its inlier band: a far floor comes in depth layers, up to
+        // 32 mm off the floor's plane (s19019), here 8 % of the section's points.
+        let (section_pts, section) = plate(30.0, 0.0, 0.6);
+        let own = section_pts.len();
+        let (s, c) = (libm::sinf(30f32.to_radians()), libm::cosf(30f32.to_radians()));
+        let with_strip = |below: f32| {
+            let mut pts = section_pts.clone();
+            for i in 0..26 {
+                for dz in [-0.032f32, -0.016, 0.0, 0.016, 0.032] {
+                    let z = dz - below;
+                    pts.push(Point3::new(-0.25 + i as f32 * 0.02, z / s * c, z));
+                }
+            }
+            pts
+        };
+        let floor = Plane::through(Vector3::new(0.0, 0.0, -0.6), Vector3::z());
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z());
+        let found = [(section, own), (floor, 2 * own)];
+        let height = |pts: &[Point3], floor| {
+            let labels = vec![1u8; pts.len()];
+            let bottom = SectionBottom {
+                label: 1,
+                points: own,
+                up: Vector3::z(),
+                found: &found,
+                floor,
+            };
+            bottom.height_above(&mattress, pts, &labels)
+        };
+        let far = with_strip(0.6);
+        // The identified floor's strip is left out; without the floor found, the empty 0.5 m between leaves it out.
+        // (Either alone mends this strip; on the stored sequences' first frames each alone mended fewer.)
+        for floor in [Some(floor), None] {
+            let h = height(&far, floor);
+            assert!(h.abs() < 0.02, "{floor:?}: {h}");
+        }
+        // Points 0.2 m under the hinge (the bed's base, say) are no such gap away: they are the bottom.
+        let near = with_strip(0.2);
+        let h = height(&near, None);
+        assert!((h + 0.2).abs() < 0.04, "{h}");
+        // Nor is a fifth of the points or more, whatever the gap: the section may be mostly hidden.
+        let mut heavy = far.clone();
+        for _ in 0..3 {
+            heavy.extend_from_slice(&far[own..]);
+        }
+        let h = height(&heavy, None);
+        assert!((h + 0.6).abs() < 0.04, "{h}");
     }
 
     /// A bed whose flat part returns no depth (a dark cover), its head section raised 40° from the hinge at world
