@@ -26,6 +26,7 @@ use supine_core::body_model::SHAPE_COMPONENTS;
 use supine_core::camera::Intrinsics;
 use supine_core::geometry::{Isometry3, Point3, Vector3};
 use supine_core::tracker::accuracy::{self, TrackedFrame, TruthFrame};
+use supine_core::tracker::budget::Stage;
 use supine_core::tracker::{ArmSample, FrameReport, Models, ScratchSizes, Tracker, TrackerConfig, Variant};
 use supine_core::wire::TrackerState;
 use supine_drivers::SourceErrorKind;
@@ -203,6 +204,8 @@ pub struct FrameScore {
     pub probe_true_distance_mm: Option<f32>,
     /// Processing time, ms.
     pub ms: f32,
+    /// Processing time per stage (init, forest, ICP, output: [`Stage::ALL`]'s order), ms.
+    pub stage_ms: [f32; 4],
     /// True occluded fraction of the torso.
     pub occluded: f32,
     /// RMS point-to-plane residual of the frame's torso fit, mm (frames where a fit ran).
@@ -347,6 +350,7 @@ pub fn run_variant(
             frame: i as u32,
             state: r.state.name().to_string(),
             ms: r.times.total() as f32 / 1000.0,
+            stage_ms: Stage::ALL.map(|st| r.times.of(st) as f32 / 1000.0),
             occluded: t.torso_occluded_fraction,
             ..FrameScore::default()
         };
@@ -420,6 +424,15 @@ pub fn run_variant(
         *e = json!(e.as_u64().unwrap_or(0) + 1);
     }
     let mut ms: Vec<f32> = after_init.iter().map(|s| s.ms).collect();
+    // Each stage's own percentiles over the same frames: where the frame's time goes (the per-stage latency).
+    let stage_percentile = |q: f32| {
+        let mut m = serde_json::Map::new();
+        for (i, st) in Stage::ALL.iter().enumerate() {
+            let mut v: Vec<f32> = after_init.iter().map(|s| s.stage_ms[i]).collect();
+            m.insert(st.name().to_string(), json!(percentile(&mut v, q)));
+        }
+        Value::Object(m)
+    };
     let recovery = full
         .as_ref()
         .and_then(|f| f.episodes().full_occlusion.as_ref().map(|o| o.end))
@@ -443,6 +456,8 @@ pub fn run_variant(
         "states": states,
         "latency_ms_p50": percentile(&mut ms, 0.5),
         "latency_ms_p99": percentile(&mut ms, 0.99),
+        "stage_ms_p50": stage_percentile(0.5),
+        "stage_ms_p99": stage_percentile(0.99),
         "budget_overruns": c.overruns,
         "icp_cuts": c.icp_cuts,
         // The init phase's shape (σ units) beside the truth: the largest term of the torso error.
@@ -485,13 +500,22 @@ fn variants(names: &[String]) -> Result<Vec<Variant>> {
 
 /// Average the per-sequence summaries of one variant (frame-weighted for rates, mean for errors).
 fn combine(summaries: &[Value]) -> Value {
-    let num =
-        |k: &str| -> Option<f32> { mean(summaries.iter().filter_map(|s| s[k].as_f64().map(|x| x as f32))) };
-    let max = |k: &str| -> Option<f32> {
-        summaries
-            .iter()
-            .filter_map(|s| s[k].as_f64().map(|x| x as f32))
-            .reduce(f32::max)
+    // `k` is a path: "latency_ms_p50", "stage_ms_p50/icp".
+    let at = |s: &Value, k: &str| {
+        s.pointer(&format!("/{k}"))
+            .and_then(Value::as_f64)
+            .map(|x| x as f32)
+    };
+    let num = |k: &str| -> Option<f32> { mean(summaries.iter().filter_map(|s| at(s, k))) };
+    let max = |k: &str| -> Option<f32> { summaries.iter().filter_map(|s| at(s, k)).reduce(f32::max) };
+    // Per stage as the totals: the mean of the sequences' p50s, the largest p99.
+    let per_stage = |k: &str, f: &dyn Fn(&str) -> Option<f32>| {
+        let mut m = serde_json::Map::new();
+        for st in Stage::ALL {
+            let key = format!("{k}/{}", st.name());
+            m.insert(st.name().to_string(), json!(f(&key)));
+        }
+        Value::Object(m)
     };
     let mut states = serde_json::Map::new();
     for s in summaries {
@@ -515,6 +539,8 @@ fn combine(summaries: &[Value]) -> Value {
         "states": states,
         "latency_ms_p50": num("latency_ms_p50"),
         "latency_ms_p99": max("latency_ms_p99"),
+        "stage_ms_p50": per_stage("stage_ms_p50", &num),
+        "stage_ms_p99": per_stage("stage_ms_p99", &max),
         "budget_overruns": summaries.iter().map(|s| s["budget_overruns"].as_u64().unwrap_or(0)).sum::<u64>(),
     })
 }
@@ -600,6 +626,19 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
             r["latency_ms_p50"].as_f64().unwrap_or(f64::NAN),
             r["latency_ms_p99"].as_f64().unwrap_or(f64::NAN),
         );
+        let stages: Vec<String> = Stage::ALL
+            .iter()
+            .map(|st| {
+                let ms = |k: &str| r[k][st.name()].as_f64().unwrap_or(f64::NAN);
+                format!(
+                    "{} {:.2} / {:.2}",
+                    st.name(),
+                    ms("stage_ms_p50"),
+                    ms("stage_ms_p99")
+                )
+            })
+            .collect();
+        println!("{:<20} stage ms p50 / p99: {}", "", stages.join(", "));
     }
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_vec_pretty(&report)?)

@@ -1,0 +1,96 @@
+//! `supine-models eval tracking`'s report on the committed demo sequence with full occlusion: the keys
+//! `../shared/design/cli.md` promises, and the per-stage latency (init, forest, ICP, output), which must split each
+//! frame's processing time and stay within the whole frame's percentiles.
+
+use clap::Parser;
+use serde_json::Value;
+use std::path::Path;
+use std::process::ExitCode;
+use supine_models::eval::tracking::{self, TrackingEvalArgs};
+
+#[derive(Parser)]
+struct Cli {
+    #[command(flatten)]
+    args: TrackingEvalArgs,
+}
+
+const STAGES: [&str; 4] = ["init", "forest", "icp", "output"];
+
+fn ms(v: &Value, path: &str) -> f64 {
+    v.pointer(path)
+        .and_then(Value::as_f64)
+        .unwrap_or_else(|| panic!("{path} missing or not a number"))
+}
+
+#[test]
+fn the_report_has_the_contracts_keys_and_each_stages_latency() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo/occlusion");
+    let out = std::env::temp_dir().join(format!("eval-tracking-report-{}.json", std::process::id()));
+    let cli = Cli::parse_from([
+        "eval-tracking".as_ref(),
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--json".as_ref(),
+        out.as_os_str(),
+        "--variants".as_ref(),
+        "forest_icp_feedback".as_ref(),
+        "--budget-ms".as_ref(),
+        "1000".as_ref(),
+    ]);
+    assert_eq!(tracking::run(&cli.args), ExitCode::SUCCESS);
+    let report: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&out);
+    assert!(report["commit"].is_string());
+    let summary = &report["forest_icp_feedback"];
+    for key in [
+        "frames",
+        "tracked_fraction",
+        "torso_surface_error_mm_mean",
+        "point_error_mm_mean",
+        "probe_error_mm_mean",
+        "probe_distance_error_mm_mean",
+        "recovery_frames",
+        "states",
+        "latency_ms_p50",
+        "latency_ms_p99",
+        "budget_overruns",
+    ] {
+        assert!(!summary[key].is_null(), "summary lacks {key}");
+    }
+    let seqs = report["sequences"].as_array().unwrap();
+    assert_eq!(seqs.len(), 1);
+    let one = &seqs[0]["variants"]["forest_icp_feedback"];
+    // The stages split every frame's time.
+    let frames = one["per_frame"].as_array().unwrap();
+    assert_eq!(frames.len(), 88);
+    for f in frames {
+        let parts: f64 = f["stage_ms"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|x| x.as_f64().unwrap())
+            .sum();
+        assert!(
+            (parts - f["ms"].as_f64().unwrap()).abs() < 0.01,
+            "frame {}: {parts} against {}",
+            f["frame"],
+            f["ms"]
+        );
+    }
+    // No stage's percentile can exceed the whole frame's (each frame's stage time is at most its total), and the
+    // tracked frames run the forest and the ICP.
+    for st in STAGES {
+        for q in ["p50", "p99"] {
+            let stage = ms(one, &format!("/stage_ms_{q}/{st}"));
+            let total = ms(one, &format!("/latency_ms_{q}"));
+            assert!(
+                (0.0..=total).contains(&stage),
+                "{st} {q}: {stage} ms against the frame's {total}"
+            );
+            // One sequence: the summary's figure is the sequence's.
+            assert_eq!(stage, ms(summary, &format!("/stage_ms_{q}/{st}")), "{st} {q}");
+        }
+    }
+    assert!(ms(one, "/stage_ms_p50/forest") > 0.0);
+    assert!(ms(one, "/stage_ms_p50/icp") > 0.0);
+}
