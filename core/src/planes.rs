@@ -301,9 +301,13 @@ pub fn estimate_bed(
     // rather than on `f` (more within a lying body's height above it). Without the last test, a low view that
     // hides the floor took the mattress for the floor and the arm's links 0.67 m above it for the mattress (s984 of
     // the 981-986 set, found after its held-out run).
+    // Nor can `b` lie nearer the camera than a mattress can (`MIN_MATTRESS_DISTANCE_M`): the flat top of an arm link
+    // near the camera, with more of the arm "lying on" it than the patient the arm hides, made the mattress the
+    // floor (s22008: a link 0.45 m above the mattress, 0.54 m from the camera; the mattress then placed 153 mm low).
     let bed_height = |f: &Plane, b: &Plane| {
         parallel(f, b)
             && (FLOOR_TO_MATTRESS_M.0..FLOOR_TO_MATTRESS_M.1).contains(&above(f, b))
+            && b.d >= MIN_MATTRESS_DISTANCE_M
             && lying_on(points, b) > lying_on(points, f)
     };
     // A patient covers most of the mattress, so its visible band may be too small for the search above: when the
@@ -1550,6 +1554,13 @@ mod tests {
         // fills more of the image than the patient's box: by what lies on it the plate looks like the mattress and
         // the mattress like the floor. A patient lying on the plate, 0.6 m from the camera, could not be seen.
         let (mut depth, camera_from_world, mattress, _) = scene_with(3.0, Some(0.67));
+        assert!(add_slab(&mut depth, &camera_from_world) > 15_000);
+        assert_mattress_without_floor(&depth, &camera_from_world, &mattress);
+    }
+
+    /// Draws the arm's upper links of [`a_plate_too_near_the_camera_is_not_the_mattress_whatever_lies_on_it`] into
+    /// `depth`; returns the pixels they cover.
+    fn add_slab(depth: &mut [u16], camera_from_world: &Isometry3) -> usize {
         let world_from_camera = camera_from_world.inverse();
         let k = Intrinsics::KINECT_V1;
         let eye = world_from_camera.translation.vector;
@@ -1574,7 +1585,54 @@ mod tests {
                 }
             }
         }
-        assert!(slab_pixels > 15_000, "{slab_pixels}");
+        slab_pixels
+    }
+
+    /// Draws a ramp 1.2 m wide rising 49° toward the head end from 0.1 m over the mattress at y = 0.3 into `depth`
+    /// (a tilted, bed-wide plane: what a head section looks like to the search); returns the pixels it covers.
+    fn tilted_ramp(depth: &mut [u16], camera_from_world: &Isometry3) -> usize {
+        const RAMP_Y: f32 = 0.3;
+        const RAMP_Z: f32 = 0.1;
+        let world_from_camera = camera_from_world.inverse();
+        let k = Intrinsics::KINECT_V1;
+        let eye = world_from_camera.translation.vector;
+        let (s, c) = (libm::sinf(49f32.to_radians()), libm::cosf(49f32.to_radians()));
+        let n = Vector3::new(0.0, -s, c);
+        let at = Vector3::new(0.0, RAMP_Y, RAMP_Z);
+        let mut pixels = 0;
+        for v in 0..HEIGHT {
+            for u in 0..WIDTH {
+                let ray = world_from_camera.rotation * k.unproject(u as f32, v as f32, 1.0).coords;
+                let den = n.dot(&ray);
+                if den.abs() < 1e-6 {
+                    continue;
+                }
+                let t = n.dot(&(at - eye)) / den;
+                let p = eye + ray * t;
+                let along = (p.y - RAMP_Y) * c + (p.z - RAMP_Z) * s;
+                let old = depth[v * WIDTH + u];
+                if t > 0.0
+                    && p.x.abs() < 0.6
+                    && (0.0..0.8).contains(&along)
+                    && (old == 0 || t * 1000.0 < old as f32)
+                {
+                    depth[v * WIDTH + u] = (t * 1000.0).round() as u16;
+                    pixels += 1;
+                }
+            }
+        }
+        pixels
+    }
+
+    #[test]
+    fn an_arm_links_top_near_the_camera_does_not_make_the_mattress_the_floor() {
+        // The slab's scene (more of the arm "lies on" the plate 0.67 m up, 0.6 m from the camera, than of the
+        // patient on the mattress) and a ramp whose bottom the search takes for a raised section's. With the plate
+        // taken for a mattress over a "floor" (here the patient's top, on s22008 the mattress), no level plane was
+        // left for the mattress, and it was placed through the ramp's bottom (s22008: 153 mm low).
+        let (mut depth, camera_from_world, mattress, _) = scene_with(3.0, Some(0.67));
+        assert!(add_slab(&mut depth, &camera_from_world) > 15_000);
+        assert!(tilted_ramp(&mut depth, &camera_from_world) > 20_000);
         assert_mattress_without_floor(&depth, &camera_from_world, &mattress);
     }
 
