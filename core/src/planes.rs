@@ -192,7 +192,7 @@ const MAX_PLANES: usize = 5;
 /// With the bed's base bared under a raised section, the flat mattress lies parallel to it within this angle,
 /// degrees. A level-looking plane farther off is RANSAC's plane through disconnected patches (s21012: the legs'
 /// side and the base's far end, 5.2° off the base, taken for the mattress under a section whose hinge the hips
-/// hide; the section then refused). On the first 5 frames of the 214 stored sequences, no other bed changed.
+/// hide; the section then refused). On the first 5 frames of the 238 stored sequences, no other bed changed.
 const MATTRESS_ON_BASE_DEG: f32 = 2.5;
 /// A plane this close to up is horizontal, degrees.
 const HORIZONTAL_DEG: f32 = 10.0;
