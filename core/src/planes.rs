@@ -5,16 +5,19 @@
 //!
 //! The init phase requires the patient on the bed and no other object in view. The mattress is the plane with the
 //! patient on it: when the floor is visible too it is the parallel plane nearer the camera with more lying on it (a
-//! plane of the robot arm's links a bed's height above a mattress is not a mattress over a floor); when one plane is
-//! found alone, it is the mattress if something body-sized lies on it. The long axis is the principal axis of the
-//! points lying on the mattress (a patient lies along the bed), which an occluded or image-cropped mattress would not
-//! give. A raised head section is the largest plane tilted from up that spans the bed, rises from the mattress at a
-//! hinge, ends below the volume's top and is one flat surface (its points' local normals along its own); the clip keeps
-//! only what lies above it as well, and the bed's long axis runs up its slope. A patient on a raised section can hide
-//! the whole mattress: then a bed-wide tilted plane larger than the chosen mattress whose bottom lies well below it (an
-//! arm link's or the legs' flat top was chosen) or a bed's height above it (the floor was) places the mattress level
-//! through that bottom; a level plane 8-35 cm under that bottom whose points lie under the section is the bed's base
-//! bared by it, never the mattress (the mattress then goes a nominal thickness above it). Up is the caller's (from
+//! plane of the robot arm's links a bed's height above a mattress, or nearer the camera than a mattress can lie, is not
+//! a mattress over a floor); when one plane is found alone, it is the mattress if something body-sized lies on it. The
+//! long axis is the principal axis of the points lying on the mattress (a patient lies along the bed), which an
+//! occluded or image-cropped mattress would not give. A raised head section is the largest plane tilted from up that
+//! spans the bed, rises from the mattress at a hinge, ends below the volume's top and is one flat surface (its points'
+//! local normals along its own); the clip keeps only what lies above it as well, and the bed's long axis runs up its
+//! slope. A patient on a raised section can hide the whole mattress: then a bed-wide tilted plane larger than the
+//! chosen mattress whose bottom lies well below it (an arm link's or the legs' flat top was chosen) or a bed's height
+//! above it (the floor was) places the mattress level through that bottom; a level plane 8-35 cm under that bottom
+//! whose points lie under the section is the bed's base bared by it, never the mattress (the mattress then goes a
+//! nominal thickness above it), and a level-looking plane more than 2.5° off that base is not the mattress either. A
+//! section's bottom leaves out the strip of the floor its plane crosses (5 cm each side: a far floor comes in depth
+//! layers) and, when no floor was found, its points below an empty 0.3 m of height. Up is the caller's (from
 //! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
 //! steeply raised head section in a close view can defeat.
 //!
