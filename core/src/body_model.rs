@@ -438,7 +438,7 @@ impl<'a> BodyModelView<'a> {
         self.shape_row(v, s)
     }
 
-    /// The K basis vectors of row `row` (out[k] = dequantised `V` rows for component k); returns how many were
+    /// The K basis vectors of row `row` (`out[k]` = dequantised `V` rows for component k); returns how many were
     /// written (`min(out.len(), K)`). This is the Jacobian of the row's position w.r.t. `s`, as Eq. 7 needs.
     pub fn row_basis(&self, row: usize, out: &mut [[f32; 3]]) -> usize {
         let n = out.len().min(self.counts.components);

@@ -22,7 +22,7 @@
 //! ...          section data; every section starts at a multiple of SECTION_ALIGN from the file start
 //! ```
 //!
-//! The writer ([`encoded_len`], [`write`]) is here too (it needs no allocation either: the caller provides the
+//! The writer ([`encoded_len`], [`fn@write`]) is here too (it needs no allocation either: the caller provides the
 //! output buffer), so that every file kind is produced by the same code that validates it.
 //! Cost: `parse` is one CRC-32C pass over the file (about 1 ns/byte) plus O(sections); views cost nothing per use.
 
@@ -614,7 +614,7 @@ pub struct SectionData<'a> {
     pub bytes: &'a [u8],
 }
 
-/// Why [`write`] refused.
+/// Why [`fn@write`] refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 #[non_exhaustive]
 pub enum WriteError {

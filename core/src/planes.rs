@@ -791,10 +791,10 @@ fn mostly_under(section: &Plane, points: &[Point3], labels: &[u8], label: u8) ->
 }
 
 /// Of the points labelled `label` (a plane's own inliers), how many had a local surface normal to test and how many
-/// of those lie within [`SURFACE_NORMAL_DEG`] of `plane`'s normal: the normal of the depth surface through each
-/// point, from its neighbours [`SURFACE_STEP_PX`] pixels away in `frame` (skipped where a neighbour has no depth or
-/// lies more than [`SURFACE_STEP_JUMP_M`] off, an edge). A bed's head section is one flat surface; a plane that RANSAC
-/// draws through a curved body, an arm and a strip of floor only crosses them. At most [`SURFACE_SAMPLES`] points.
+/// of those lie within `SURFACE_NORMAL_DEG` of `plane`'s normal: the normal of the depth surface through each
+/// point, from its neighbours `SURFACE_STEP_PX` pixels away in `frame` (skipped where a neighbour has no depth or
+/// lies more than `SURFACE_STEP_JUMP_M` off, an edge). A bed's head section is one flat surface; a plane that RANSAC
+/// draws through a curved body, an arm and a strip of floor only crosses them. At most `SURFACE_SAMPLES` points.
 pub fn surface_agreement(
     frame: &DepthFrame<'_>,
     k: &Intrinsics,

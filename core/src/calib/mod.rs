@@ -5,7 +5,7 @@
 //! - [`tip`]: probe-tip detection in a depth frame near a prior, with a confidence; ambiguous frames are refused.
 //! - [`pairing`]: arm history and time matching (each frame to the arm state nearest its capture time), stillness,
 //!   and the dwell collector that averages the still frames of one pose.
-//! - [`solve`]: Kabsch/Umeyama inside RANSAC over triples of pairs, a Huber-reweighted refinement, residuals and
+//! - [`mod@solve`]: Kabsch/Umeyama inside RANSAC over triples of pairs, a Huber-reweighted refinement, residuals and
 //!   the condition number that refuses too few, collinear or near-coplanar pose sets.
 //!
 //! - [`start`]: the guess-free start: the probe tip as a local lowest point of what moves above the bed, picked

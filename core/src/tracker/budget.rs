@@ -11,7 +11,7 @@
 //!    half its budget before it would start.
 //!
 //! A frame that still ends over budget is counted as an overrun. The tracker never queues frames: the caller
-//! hands it the newest one and reports what it dropped ([`Budget`] counts them for the health message).
+//! hands it the newest one and reports what it dropped ([`BudgetCounters`] counts them for the health message).
 //!
 //! Cost: one clock read per stage boundary and per ICP iteration.
 
