@@ -1,4 +1,4 @@
-//! [`FrameRecord`] → the JSON messages of one frame (see the [module docs](super) for the channels and cost).
+//! [`FrameRecord`](super::FrameRecord) → the JSON messages of one frame (see the [module docs](super) for the channels and cost).
 
 use serde_json::{Value, json};
 use supine_core::geometry::{Isometry3, Point3};

@@ -33,7 +33,7 @@
 //!
 //! Building (`supine-models body`): [`build`] samples a calibrated population ([`population`]), blends MakeHuman
 //! targets ([`phenotype`]), measures ([`measure`]), runs PCA ([`pca`]), derives the reduced rig ([`rig`]) and writes
-//! the file ([`file`]).
+//! the file ([`mod@file`]).
 
 pub mod build;
 pub mod cli;

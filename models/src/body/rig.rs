@@ -303,7 +303,7 @@ pub fn load_rig(assets: &mut Assets, base: &BaseMesh) -> Result<RigDef> {
 }
 
 /// The six salient points as weighted vertex sums (indices into all 19158), in
-/// [`supine_core::body_model::SalientPoint::ALL`] order: head = midpoint of the joint-neck and joint-head cubes,
+/// [`supine_core::salient::SalientPoint::ALL`] order: head = midpoint of the joint-neck and joint-head cubes,
 /// shoulders = joint-l/r-shoulder, belly = navel vertex 4116, hips = joint-l/r-upper-leg.
 pub fn salient_defs(base: &BaseMesh) -> Result<[Vec<(u32, f64)>; SalientPoint::COUNT]> {
     let cube = |n: &str| -> Result<Vec<u32>> {

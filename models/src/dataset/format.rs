@@ -14,8 +14,8 @@
 //! 0, 1, 2, 3) and split into a plane of low bytes and a plane of high bytes: differences are small, so the high
 //! plane is almost all zeros and both deflate well.
 //! zlib's Adler-32 checks the decompressed payload (a fast checksum: a table CRC would cost as much as the
-//! deflate). JSON blocks are UTF-8 [`BodyTruth`](super::BodyTruth) /
-//! [`ViewTruth`](super::ViewTruth).
+//! deflate). JSON blocks are UTF-8 [`BodyTruth`] /
+//! [`ViewTruth`].
 //!
 //! Cost: encoding a 640x480 crop is one delta pass and one fast deflate (a few ms); decoding is the inverse. The reader
 //! validates magic, version, lengths (against the file size) and the checksum, and reports a bad file as an error

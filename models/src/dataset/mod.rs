@@ -5,7 +5,7 @@
 //! Layout of `DIR` (see `docs/dataset-format.md`):
 //! - `dataset.json`: the [`Manifest`] (parameters, seed, intrinsics, noise model, legends);
 //! - `split.json`: `{"train": [body indices], "test": [...]}`;
-//! - `bodies/body_NNNNN.svd`: one file per body, [`format`];
+//! - `bodies/body_NNNNN.svd`: one file per body, [`mod@format`];
 //! - `previews/*.png`: a few colour-mapped depth images with the salient points drawn.
 //!
 //! Generation is deterministic for a seed (every body has its own ChaCha8 stream derived from the seed and its index,
