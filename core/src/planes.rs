@@ -429,9 +429,9 @@ pub fn estimate_bed(
         }
         (Some(m), None) => m,
         (None, Some(b)) => (section_level(&b), 0),
-        // Only planes too near the camera for a patient on them to be seen lie a bed's height above the "floor":
-        // they are the arm's links, and there is no floor in view (a low view); the mattress is the farthest
-        // level plane.
+        // No level plane at a bed's height and no section: a low view without a floor (`bed_height` no longer
+        // lets a plane too near the camera make one; only a `parallel_deg` wider than `HORIZONTAL_DEG` can still
+        // bring a floor here, which is dropped). The mattress is the farthest level plane.
         (None, None) => {
             floor = None;
             found
@@ -625,7 +625,7 @@ impl SectionBottom<'_> {
         let own = || {
             section_points(points, labels, self.label, self.found, &floor).map(|p| plane.signed_distance(p))
         };
-        low_quantile(own, SECTION_BOTTOM_SHARE, SECTION_GAP_M)
+        low_quantile(own, SECTION_BOTTOM_SHARE, SECTION_GAP_M, SECTION_STRIP_MAX_SHARE)
     }
 
     /// The level plane (normal `up`) through the section's bottom.
@@ -705,9 +705,9 @@ const FLOOR_STRIP_M: f32 = 0.05;
 
 /// The value under which `share` of the values `own` yields lie (1 cm bins over their range; 0 when none), but
 /// above the lowest values when an empty stretch at least `gap` long separates them from the rest and they are at
-/// most [`SECTION_STRIP_MAX_SHARE`] of all. Those still count toward `share`: [`SECTION_BOTTOM_SHARE`] was set with
-/// them in, and counting only the rest put s4004's mattress 16 mm high (few points show near its hinge).
-fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32, gap: f32) -> f32 {
+/// most `max_dropped` of all. Those still count toward `share`: [`SECTION_BOTTOM_SHARE`] was set with them in, and
+/// counting only the rest put s4004's mattress 16 mm high (few points show near its hinge).
+fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32, gap: f32, max_dropped: f32) -> f32 {
     const BINS: usize = 256;
     let (lo, hi, n) = own().fold((f32::INFINITY, f32::NEG_INFINITY, 0u32), |(lo, hi, n), x| {
         (lo.min(x), hi.max(x), n + 1)
@@ -726,7 +726,7 @@ fn low_quantile<I: Iterator<Item = f32>>(own: impl Fn() -> I, share: f32, gap: f
             empty += bin;
             continue;
         }
-        if empty >= gap && below as f32 <= SECTION_STRIP_MAX_SHARE * n as f32 {
+        if empty >= gap && below as f32 <= max_dropped * n as f32 {
             dropped = below;
         }
         empty = 0.0;
@@ -1564,44 +1564,28 @@ mod tests {
     /// Draws the arm's upper links of [`a_plate_too_near_the_camera_is_not_the_mattress_whatever_lies_on_it`] into
     /// `depth`; returns the pixels they cover.
     fn add_slab(depth: &mut [u16], camera_from_world: &Isometry3) -> usize {
-        let world_from_camera = camera_from_world.inverse();
-        let k = Intrinsics::KINECT_V1;
-        let eye = world_from_camera.translation.vector;
-        let mut slab_pixels = 0;
-        for v in 0..HEIGHT {
-            for u in 0..WIDTH {
-                let ray = world_from_camera.rotation * k.unproject(u as f32, v as f32, 1.0).coords;
-                // z = 0.72 + 0.26 (0.2 - y) / 0.8 over y in -0.9..0.2, x in -0.55..-0.15: rising toward the camera,
-                // a strip 0.4 m wide across its slope (not a bed-wide head section).
-                let slope = 0.26 / 0.8;
-                let denom = ray.z + slope * ray.y;
-                if denom.abs() < 1e-6 {
-                    continue;
-                }
-                let t = (0.72 + slope * (0.2 - eye.y) - eye.z) / denom;
-                let p = eye + ray * t;
-                let old = depth[v * WIDTH + u];
-                let on_slab = (-0.9..0.2).contains(&p.y) && (-0.55..-0.15).contains(&p.x);
-                if t > 0.0 && on_slab && (old == 0 || t * 1000.0 < old as f32) {
-                    depth[v * WIDTH + u] = (t * 1000.0).round() as u16;
-                    slab_pixels += 1;
-                }
-            }
-        }
-        slab_pixels
+        // z = 0.72 + 0.26 (0.2 - y) / 0.8 over y in -0.9..0.2, x in -0.55..-0.15: rising toward the camera, a strip
+        // 0.4 m wide across its slope (not a bed-wide head section).
+        let slope = 0.26 / 0.8;
+        overlay_plane(
+            depth,
+            camera_from_world,
+            (Vector3::new(0.0, slope, 1.0), Vector3::new(0.0, 0.2, 0.72)),
+            |p| (-0.9..0.2).contains(&p.y) && (-0.55..-0.15).contains(&p.x),
+        )
     }
 
-    /// Draws a ramp 1.2 m wide rising 49° toward the head end from 0.1 m over the mattress at y = 0.3 into `depth`
-    /// (a tilted, bed-wide plane: what a head section looks like to the search); returns the pixels it covers.
-    fn tilted_ramp(depth: &mut [u16], camera_from_world: &Isometry3) -> usize {
-        const RAMP_Y: f32 = 0.3;
-        const RAMP_Z: f32 = 0.1;
+    /// Draws into `depth` the part of the world plane (normal, point) that `inside` keeps, wherever it is nearer
+    /// than what `depth` holds; returns the pixels drawn.
+    fn overlay_plane(
+        depth: &mut [u16],
+        camera_from_world: &Isometry3,
+        (n, at): (Vector3, Vector3),
+        inside: impl Fn(Vector3) -> bool,
+    ) -> usize {
         let world_from_camera = camera_from_world.inverse();
         let k = Intrinsics::KINECT_V1;
         let eye = world_from_camera.translation.vector;
-        let (s, c) = (libm::sinf(49f32.to_radians()), libm::cosf(49f32.to_radians()));
-        let n = Vector3::new(0.0, -s, c);
-        let at = Vector3::new(0.0, RAMP_Y, RAMP_Z);
         let mut pixels = 0;
         for v in 0..HEIGHT {
             for u in 0..WIDTH {
@@ -1612,19 +1596,28 @@ mod tests {
                 }
                 let t = n.dot(&(at - eye)) / den;
                 let p = eye + ray * t;
-                let along = (p.y - RAMP_Y) * c + (p.z - RAMP_Z) * s;
                 let old = depth[v * WIDTH + u];
-                if t > 0.0
-                    && p.x.abs() < 0.6
-                    && (0.0..0.8).contains(&along)
-                    && (old == 0 || t * 1000.0 < old as f32)
-                {
+                if t > 0.0 && inside(p) && (old == 0 || t * 1000.0 < old as f32) {
                     depth[v * WIDTH + u] = (t * 1000.0).round() as u16;
                     pixels += 1;
                 }
             }
         }
         pixels
+    }
+
+    /// Draws a ramp 1.2 m wide rising 49° toward the head end from 0.1 m over the mattress at y = 0.3 into `depth`
+    /// (a tilted, bed-wide plane: what a head section looks like to the search); returns the pixels it covers.
+    fn tilted_ramp(depth: &mut [u16], camera_from_world: &Isometry3) -> usize {
+        const RAMP_Y: f32 = 0.3;
+        const RAMP_Z: f32 = 0.1;
+        let (s, c) = (libm::sinf(49f32.to_radians()), libm::cosf(49f32.to_radians()));
+        overlay_plane(
+            depth,
+            camera_from_world,
+            (Vector3::new(0.0, -s, c), Vector3::new(0.0, RAMP_Y, RAMP_Z)),
+            |p| p.x.abs() < 0.6 && (0.0..0.8).contains(&((p.y - RAMP_Y) * c + (p.z - RAMP_Z) * s)),
+        )
     }
 
     #[test]
