@@ -6,6 +6,7 @@ use clap::Parser;
 use serde_json::Value;
 use std::path::Path;
 use std::process::ExitCode;
+use supine_core::tracker::budget::Stage;
 use supine_models::eval::tracking::{self, TrackingEvalArgs};
 
 #[derive(Parser)]
@@ -13,8 +14,6 @@ struct Cli {
     #[command(flatten)]
     args: TrackingEvalArgs,
 }
-
-const STAGES: [&str; 4] = ["init", "forest", "icp", "output"];
 
 fn ms(v: &Value, path: &str) -> f64 {
     v.pointer(path)
@@ -79,7 +78,7 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
     }
     // No stage's percentile can exceed the whole frame's (each frame's stage time is at most its total), and the
     // tracked frames run the forest and the ICP.
-    for st in STAGES {
+    for st in Stage::ALL.map(Stage::name) {
         for q in ["p50", "p99"] {
             let stage = ms(one, &format!("/stage_ms_{q}/{st}"));
             let total = ms(one, &format!("/latency_ms_{q}"));
