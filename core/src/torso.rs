@@ -34,6 +34,27 @@ pub fn a_from_torso(salient: &[Point3; SalientPoint::COUNT]) -> Option<Isometry3
     ))
 }
 
+/// Area-weighted outward vertex normals of `vertices` over `triangles` (index triples, counter-clockwise seen from
+/// outside); a vertex of no triangle gets +z. Triangles naming a vertex past the slices are skipped.
+pub fn vertex_normals(triangles: LeSlice<'_, u16>, vertices: &[Point3], normals: &mut [Vector3]) {
+    let n = vertices.len().min(normals.len());
+    normals.fill(Vector3::zeros());
+    for t in 0..triangles.len() / 3 {
+        let [a, b, c] = [0, 1, 2].map(|i| triangles.at(3 * t + i) as usize);
+        if a >= n || b >= n || c >= n {
+            continue;
+        }
+        // Counter-clockwise seen from outside: the cross product points out, with twice the area as length.
+        let face = (vertices[b] - vertices[a]).cross(&(vertices[c] - vertices[a]));
+        for i in [a, b, c] {
+            normals[i] += face;
+        }
+    }
+    for nrm in normals.iter_mut() {
+        *nrm = nrm.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+    }
+}
+
 /// Caller buffers for a [`TorsoSurface`], one entry per torso-subset vertex.
 #[derive(Debug)]
 pub struct TorsoBuffers<'a> {
@@ -77,18 +98,7 @@ impl<'a> TorsoSurface<'a> {
             *out = torso_from_body * Point3::from(view.shape_vertex(v as usize, s));
         }
         let triangles = view.torso_subset_triangles();
-        buf.normals.fill(Vector3::zeros());
-        for t in 0..triangles.len() / 3 {
-            let [a, b, c] = [0, 1, 2].map(|i| triangles.at(3 * t + i) as usize);
-            // Counter-clockwise seen from outside: the cross product points out, with twice the area as length.
-            let face = (buf.vertices[b] - buf.vertices[a]).cross(&(buf.vertices[c] - buf.vertices[a]));
-            for i in [a, b, c] {
-                buf.normals[i] += face;
-            }
-        }
-        for nrm in buf.normals.iter_mut() {
-            *nrm = nrm.try_normalize(1e-12).unwrap_or_else(Vector3::z);
-        }
+        vertex_normals(triangles, buf.vertices, buf.normals);
         // Torso half-width: the widest chest or abdomen vertex from the midline.
         let half_width = subset
             .iter()
