@@ -11,6 +11,7 @@ use supine_core::geometry::{Isometry3, Point3, Vector3};
 use supine_core::model_file::ModelFileError;
 use supine_core::shape::ShapeModelView;
 use supine_core::torso::{TorsoBuffers, TorsoSurface};
+use supine_core::tracker::surface::VertexSums;
 use supine_core::tracker::{Models, Scratch, ScratchSizes};
 use supine_core::wire::BodyRegion;
 
@@ -91,7 +92,7 @@ pub struct TrackerScratch {
     canonical: Vec<f32>,
     fit_points: Vec<[f32; 3]>,
     fit_normals: Vec<[f32; 3]>,
-    surface_sums: Vec<supine_core::tracker::surface::VertexSums>,
+    surface_sums: Vec<VertexSums>,
     torso_vertices: Vec<Point3>,
     torso_normals: Vec<Vector3>,
     torso_regions: Vec<BodyRegion>,
@@ -107,7 +108,7 @@ impl TrackerScratch {
             canonical: vec![0.0; sizes.canonical],
             fit_points: vec![[0.0; 3]; sizes.torso],
             fit_normals: vec![[0.0; 3]; sizes.torso],
-            surface_sums: vec![supine_core::tracker::surface::VertexSums::ZERO; sizes.torso],
+            surface_sums: vec![VertexSums::ZERO; sizes.torso],
             torso_vertices: vec![Point3::origin(); sizes.torso],
             torso_normals: vec![Vector3::zeros(); sizes.torso],
             torso_regions: vec![BodyRegion::OffBody; sizes.torso],

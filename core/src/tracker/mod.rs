@@ -570,8 +570,6 @@ impl<'m, 's> Tracker<'m, 's> {
         check("torso_vertices", sizes.torso, scratch.torso_vertices.len())?;
         check("torso_normals", sizes.torso, scratch.torso_normals.len())?;
         check("torso_regions", sizes.torso, scratch.torso_regions.len())?;
-        // The caller's buffer may hold anything: no surface adaptation yet.
-        scratch.surface_sums.fill(VertexSums::ZERO);
         Ok(Tracker {
             models,
             k,
@@ -640,7 +638,6 @@ impl<'m, 's> Tracker<'m, 's> {
     pub fn reinitialise(&mut self) {
         self.machine.reinitialise();
         self.init = Init::new();
-        self.scratch.surface_sums.fill(VertexSums::ZERO);
         self.torso = None;
         self.pose = None;
         self.last_good_pose = None;
@@ -875,7 +872,8 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) {
-        // A new patient (or the same one again): no surface adaptation yet.
+        // A new patient (or the same one again), and whatever the caller's buffer held: no surface adaptation
+        // yet. Every torso model is built from here on.
         self.scratch.surface_sums.fill(VertexSums::ZERO);
         let body = self.models.body;
         let up = bed.mattress.normal();

@@ -1,5 +1,5 @@
-//! Surface adaptation: once the lock refits are done, the shaped torso model's front surface is moved along its
-//! normals onto what the camera sees of this patient. The body model's 20 coefficients cannot hold every
+//! Surface adaptation: once the tracked torso model has settled, its front surface is moved along its normals
+//! onto what the camera sees of this patient. The body model's 20 coefficients cannot hold every
 //! patient's front (the estimate stays about 1 σ from the truth per coefficient) nor the posture the patient lies
 //! in; over a few well-seen tracked frames each torso vertex collects its distance to the observed surface, and
 //! the mean, smoothed over the mesh, becomes its displacement. Vertices the camera never saw keep the shape
@@ -251,6 +251,21 @@ mod tests {
         ))
     }
 
+    /// One frame of a flat surface `depth_mm` from the camera, added to `sums`.
+    fn observe_flat(
+        depth_mm: u16,
+        v: &[Point3],
+        n: &[Vector3],
+        tip: Option<&Point3>,
+        cfg: &SurfaceConfig,
+        sums: &mut [VertexSums],
+    ) -> usize {
+        let (k, camera_from_torso) = camera();
+        let depth = [depth_mm; WIDTH as usize * HEIGHT as usize];
+        let frame = DepthFrame::new(&depth, WIDTH, HEIGHT, Timestamp::default(), 0).expect("sized");
+        accumulate(&frame, &k, v, n, &camera_from_torso, &params(), tip, cfg, sums)
+    }
+
     /// A flat patch of `w` x `h` vertices 2 cm apart in the torso frame's x-y plane, facing +z, and its triangles.
     fn patch<const N: usize, const T: usize>(w: usize, h: usize) -> ([Point3; N], [Vector3; N], [u16; T]) {
         let mut v = [Point3::origin(); N];
@@ -272,6 +287,7 @@ mod tests {
         (v, [Vector3::z(); N], tri)
     }
 
+    /// `tri` as the little-endian view a model file gives, written into `bytes`.
     fn le<'a>(tri: &[u16], bytes: &'a mut [u8]) -> LeSlice<'a, u16> {
         for (c, t) in bytes.chunks_exact_mut(2).zip(tri) {
             c.copy_from_slice(&t.to_le_bytes());
@@ -289,11 +305,6 @@ mod tests {
     fn a_patch_seen_1_cm_nearer_the_camera_than_the_model_moves_out_by_1_cm_except_by_the_probe() {
         const W: usize = 11;
         let (mut v, mut n, tri) = patch::<{ W * W }, { 6 * (W - 1) * (W - 1) }>(W, W);
-        let (k, camera_from_torso) = camera();
-        // The observed surface: the plane 1 cm in front of the patch (0.99 m from the camera).
-        let depth = [990u16; WIDTH as usize * HEIGHT as usize];
-        let frame = DepthFrame::new(&depth, WIDTH, HEIGHT, Timestamp::default(), 0).expect("sized");
-        let params = params();
         // The probe clears the corner vertex and its three neighbours (2.8 cm away at most).
         let cfg = SurfaceConfig {
             probe_clear_m: 0.03,
@@ -301,21 +312,13 @@ mod tests {
         };
         let mut sums = [VertexSums::ZERO; W * W];
         let tip = v[0];
-        let mut total = 0;
-        for _ in 0..cfg.frames {
-            total += accumulate(
-                &frame,
-                &k,
-                &v,
-                &n,
-                &camera_from_torso,
-                &params,
-                Some(&tip),
-                &cfg,
-                &mut sums,
-            );
-        }
-        assert!(total > 0);
+        // One round's frames, all alike: the plane 1 cm in front of the patch (0.99 m from the camera).
+        let observe = |v: &[Point3], n: &[Vector3], sums: &mut [VertexSums]| -> usize {
+            (0..cfg.frames)
+                .map(|_| observe_flat(990, v, n, Some(&tip), &cfg, sums))
+                .sum()
+        };
+        assert!(observe(&v, &n, &mut sums) > 0);
         // The corner under the probe collected nothing; a middle vertex collected every frame, 1 cm each.
         for i in [0, 1, W, W + 1] {
             assert_eq!(sums[i].count, 0.0);
@@ -338,19 +341,7 @@ mod tests {
             assert!((nrm - Vector3::z()).norm() < 1e-3);
         }
         // A second round sees the moved patch on the surface and adds nothing.
-        for _ in 0..cfg.frames {
-            accumulate(
-                &frame,
-                &k,
-                &v,
-                &n,
-                &camera_from_torso,
-                &params,
-                Some(&tip),
-                &cfg,
-                &mut sums,
-            );
-        }
+        observe(&v, &n, &mut sums);
         apply(triangles, &mut v, &mut n, &mut sums, &mut tmp, cfg.frames, &cfg);
         assert!(sums.iter().all(|s| (s.total - 0.01).abs() < 2e-3));
         // A model built afresh takes the totals.
@@ -365,26 +356,12 @@ mod tests {
     fn observations_that_disagree_from_frame_to_frame_move_nothing() {
         const W: usize = 5;
         let (mut v, mut n, tri) = patch::<{ W * W }, { 6 * (W - 1) * (W - 1) }>(W, W);
-        let (k, camera_from_torso) = camera();
-        let params = params();
         let cfg = SurfaceConfig::default();
         let mut sums = [VertexSums::ZERO; W * W];
         // Something passing in front of the skin: 2.5 cm out on odd frames, on the skin on even ones (mean 1.25
         // cm, standard deviation 1.25 cm).
         for f in 0..cfg.frames {
-            let depth = [if f % 2 == 1 { 975u16 } else { 1000 }; WIDTH as usize * HEIGHT as usize];
-            let frame = DepthFrame::new(&depth, WIDTH, HEIGHT, Timestamp::default(), 0).expect("sized");
-            accumulate(
-                &frame,
-                &k,
-                &v,
-                &n,
-                &camera_from_torso,
-                &params,
-                None,
-                &cfg,
-                &mut sums,
-            );
+            observe_flat(if f % 2 == 1 { 975 } else { 1000 }, &v, &n, None, &cfg, &mut sums);
         }
         assert_eq!(sums[W * W / 2].count, f32::from(cfg.frames));
         let mut bytes = [0u8; 2 * 6 * (W - 1) * (W - 1)];
@@ -406,27 +383,10 @@ mod tests {
     fn observations_beyond_the_window_are_not_the_surface() {
         const W: usize = 5;
         let (v, n, _) = patch::<{ W * W }, { 6 * (W - 1) * (W - 1) }>(W, W);
-        let (k, camera_from_torso) = camera();
         // The arm 3.5 cm in front of the patch: inside the occluder margin, outside the window.
-        let depth = [965u16; WIDTH as usize * HEIGHT as usize];
-        let frame = DepthFrame::new(&depth, WIDTH, HEIGHT, Timestamp::default(), 0).expect("sized");
-        let params = params();
         let mut sums = [VertexSums::ZERO; W * W];
         let cfg = SurfaceConfig::default();
-        assert_eq!(
-            accumulate(
-                &frame,
-                &k,
-                &v,
-                &n,
-                &camera_from_torso,
-                &params,
-                None,
-                &cfg,
-                &mut sums
-            ),
-            0
-        );
+        assert_eq!(observe_flat(965, &v, &n, None, &cfg, &mut sums), 0);
         assert!(sums.iter().all(|s| s.count == 0.0));
     }
 }
