@@ -58,14 +58,18 @@ fn frame(depth: &[u16], t: Timestamp, index: u32) -> DepthFrame<'_> {
     DepthFrame::new(depth, 640, 480, t, index).unwrap()
 }
 
-/// Run `n` frames (the demo played forth and back) and return every packet, the states, and the allocations made
-/// by `process` after the init phase.
-fn run(
-    models: &Models<'_>,
-    cfg: TrackerConfig,
-    frames: &[(Vec<u16>, Timestamp)],
-    n: usize,
-) -> (Vec<Message>, Vec<TrackerState>, u64) {
+/// What [`run`] saw.
+struct Run {
+    packets: Vec<Message>,
+    states: Vec<TrackerState>,
+    /// Allocations made by `process` after the init phase.
+    allocations: u64,
+    /// The frame whose processing applied the first surface adaptation round.
+    surface_adapted: Option<usize>,
+}
+
+/// Run `n` frames (the demo played forth and back).
+fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)], n: usize) -> Run {
     let k = Intrinsics::KINECT_V1;
     let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
     let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
@@ -73,6 +77,7 @@ fn run(
     let mut packets = Vec::with_capacity(n * 5);
     let mut states = Vec::with_capacity(n);
     let mut allocations = 0;
+    let mut surface_adapted = None;
     for i in 0..n {
         // Forth and back: 0..59, 58..1, 0..59, ... so the motion stays continuous.
         let period = 2 * (frames.len() - 1);
@@ -88,8 +93,16 @@ fn run(
         }
         states.push(r.state);
         packets.extend(r.packets.iter().copied());
+        if surface_adapted.is_none() && tracker.surface_rounds() > 0 {
+            surface_adapted = Some(i);
+        }
     }
-    (packets, states, allocations)
+    Run {
+        packets,
+        states,
+        allocations,
+        surface_adapted,
+    }
 }
 
 #[test]
@@ -100,8 +113,16 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
     let seq = SequenceData::load(&demo_dir()).unwrap();
     let frames = frames();
     let cfg = config(&seq);
-    let (packets, states, allocations) = run(&models, cfg, &frames, 1000);
+    let Run {
+        packets,
+        states,
+        allocations,
+        surface_adapted,
+    } = run(&models, cfg, &frames, 1000);
     assert_eq!(allocations, 0, "the tracker allocated after init");
+    // The surface adaptation ran inside the allocation count and early enough for the replays below to cover it.
+    let adapted = surface_adapted.expect("the surface adaptation never ran");
+    assert!(adapted < 300, "the surface adaptation ran at frame {adapted}");
     let init = states
         .iter()
         .position(|s| *s != TrackerState::Initialising)
@@ -126,14 +147,14 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
         assert_eq!(w[1].seq, w[0].seq.wrapping_add(1));
     }
     // Replay: the same frames give the same packets, also from inside thread pools of other sizes.
-    let (again, _, _) = run(&models, cfg, &frames, 300);
+    let again = run(&models, cfg, &frames, 300).packets;
     assert_eq!(&packets[..again.len()], &again[..]);
     for threads in [1, 2] {
         let pool = rayon::ThreadPoolBuilder::new()
             .num_threads(threads)
             .build()
             .unwrap();
-        let (p, _, _) = pool.install(|| run(&models, cfg, &frames, 120));
+        let p = pool.install(|| run(&models, cfg, &frames, 120)).packets;
         assert_eq!(&packets[..p.len()], &p[..], "{threads} threads");
     }
 }

@@ -617,6 +617,11 @@ impl<'m, 's> Tracker<'m, 's> {
         self.torso.as_ref().map(|t| &t.shape)
     }
 
+    /// Surface adaptation rounds applied to the current patient's torso model ([`surface`]; 0 before the first).
+    pub fn surface_rounds(&self) -> u8 {
+        self.init.surface_rounds
+    }
+
     /// The shaped torso surface (torso frame) once the init phase is done.
     pub fn surface(&self) -> Option<TorsoSurface<'_>> {
         let t = self.torso.as_ref()?;
