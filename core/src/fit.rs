@@ -152,30 +152,7 @@ pub fn initial_pose(
 
 /// Area-weighted outward vertex normals of the shaped torso subset (from its triangles), normalised.
 pub fn subset_normals(body: &BodyModelView<'_>, points: &[[f32; 3]], normals: &mut [[f32; 3]]) {
-    normals.fill([0.0; 3]);
-    let tris = body.torso_subset_triangles();
-    for t in 0..tris.len() / 3 {
-        let ids = [
-            tris.at(3 * t) as usize,
-            tris.at(3 * t + 1) as usize,
-            tris.at(3 * t + 2) as usize,
-        ];
-        if ids.iter().any(|&i| i >= points.len()) {
-            continue;
-        }
-        let [a, b, c] = ids.map(|i| Vector3::from(points[i]));
-        let n = (b - a).cross(&(c - a));
-        for &i in &ids {
-            for (x, nx) in normals[i].iter_mut().zip(n.iter()) {
-                *x += nx;
-            }
-        }
-    }
-    for n in normals.iter_mut() {
-        let v = Vector3::from(*n);
-        let l = v.norm();
-        *n = if l > 0.0 { (v / l).into() } else { [0.0; 3] };
-    }
+    crate::torso::vertex_normals(body.torso_subset_triangles(), points, normals, Vector3::zeros());
 }
 
 /// The bed-contact term of [`fit_shape_on_bed`]: the patient's back rests on the mattress, so the lowest torso

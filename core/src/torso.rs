@@ -35,23 +35,29 @@ pub fn a_from_torso(salient: &[Point3; SalientPoint::COUNT]) -> Option<Isometry3
 }
 
 /// Area-weighted outward vertex normals of `vertices` over `triangles` (index triples, counter-clockwise seen from
-/// outside); a vertex of no triangle gets +z. Triangles naming a vertex past the slices are skipped.
-pub fn vertex_normals(triangles: LeSlice<'_, u16>, vertices: &[Point3], normals: &mut [Vector3]) {
+/// outside); a vertex of no triangle gets `lone`. Triangles naming a vertex past the slices are skipped. One routine
+/// for the torso model ([`Point3`] / [`Vector3`]) and the fit's shaped subset (`[f32; 3]`).
+pub fn vertex_normals<P, N>(triangles: LeSlice<'_, u16>, vertices: &[P], normals: &mut [N], lone: Vector3)
+where
+    P: Copy + Into<Point3>,
+    N: Copy + From<Vector3> + Into<Vector3>,
+{
     let n = vertices.len().min(normals.len());
-    normals.fill(Vector3::zeros());
+    normals.fill(N::from(Vector3::zeros()));
     for t in 0..triangles.len() / 3 {
         let [a, b, c] = [0, 1, 2].map(|i| triangles.at(3 * t + i) as usize);
         if a >= n || b >= n || c >= n {
             continue;
         }
+        let [pa, pb, pc] = [a, b, c].map(|i| vertices[i].into());
         // Counter-clockwise seen from outside: the cross product points out, with twice the area as length.
-        let face = (vertices[b] - vertices[a]).cross(&(vertices[c] - vertices[a]));
+        let face = (pb - pa).cross(&(pc - pa));
         for i in [a, b, c] {
-            normals[i] += face;
+            normals[i] = N::from(normals[i].into() + face);
         }
     }
     for nrm in normals.iter_mut() {
-        *nrm = nrm.try_normalize(1e-12).unwrap_or_else(Vector3::z);
+        *nrm = N::from((*nrm).into().try_normalize(1e-12).unwrap_or(lone));
     }
 }
 
@@ -98,7 +104,7 @@ impl<'a> TorsoSurface<'a> {
             *out = torso_from_body * Point3::from(view.shape_vertex(v as usize, s));
         }
         let triangles = view.torso_subset_triangles();
-        vertex_normals(triangles, buf.vertices, buf.normals);
+        vertex_normals(triangles, buf.vertices, buf.normals, Vector3::z());
         // Torso half-width: the widest chest or abdomen vertex from the midline.
         let half_width = subset
             .iter()

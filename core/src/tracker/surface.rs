@@ -156,19 +156,18 @@ pub fn apply(
     let n = vertices.len().min(normals.len()).min(sums.len()).min(tmp.len());
     let min_count = (cfg.min_share * f32::from(frames)).max(1.0);
     let mut own = 0;
-    // tmp[i] = (this round's displacement, its weight 0 or 1, neighbour sum).
-    for (t, s) in tmp[..n].iter_mut().zip(sums.iter()) {
+    // From here on a vertex's `sum` is this round's displacement and `count` its weight (1: known, 0: not).
+    for s in sums[..n].iter_mut() {
         let mean = s.sum / s.count.max(1.0);
         let var = s.sum_sq / s.count.max(1.0) - mean * mean;
         let seen = s.count >= min_count && var <= cfg.max_sd_m * cfg.max_sd_m;
         own += seen as usize;
-        *t = if seen { [mean, 1.0, 0.0] } else { [0.0; 3] };
+        (s.sum, s.count) = if seen { (mean, 1.0) } else { (0.0, 0.0) };
     }
     for _ in 0..cfg.smooth {
-        // The round's own fields are spent: `count` gathers the neighbours' weights.
-        for (t, s) in tmp[..n].iter_mut().zip(sums.iter_mut()) {
-            t[2] = t[0] * t[1];
-            s.count = t[1];
+        // tmp[i] = (weighted displacement, weight) over the vertex and its mesh neighbours.
+        for (t, s) in tmp[..n].iter_mut().zip(sums.iter()) {
+            *t = [s.sum * s.count, s.count, 0.0];
         }
         for f in 0..triangles.len() / 3 {
             let [a, b, c] = [0, 1, 2].map(|i| triangles.at(3 * f + i) as usize);
@@ -176,30 +175,25 @@ pub fn apply(
                 continue;
             }
             for (x, y) in [(a, b), (b, c), (c, a), (b, a), (c, b), (a, c)] {
-                tmp[x][2] += tmp[y][0] * tmp[y][1];
-                sums[x].count += tmp[y][1];
+                tmp[x][0] += sums[y].sum * sums[y].count;
+                tmp[x][1] += sums[y].count;
             }
         }
-        for (t, s) in tmp[..n].iter_mut().zip(sums.iter()) {
-            *t = if s.count > 0.0 {
-                [t[2] / s.count, 1.0, 0.0]
+        for (s, t) in sums[..n].iter_mut().zip(tmp.iter()) {
+            (s.sum, s.count) = if t[1] > 0.0 {
+                (t[0] / t[1], 1.0)
             } else {
-                [0.0; 3]
+                (0.0, 0.0)
             };
         }
     }
-    for (((v, nrm), s), t) in vertices[..n]
-        .iter_mut()
-        .zip(normals.iter())
-        .zip(sums.iter_mut())
-        .zip(tmp.iter())
-    {
-        let total = (s.total + t[0]).clamp(-cfg.max_m, cfg.max_m);
+    for ((v, nrm), s) in vertices[..n].iter_mut().zip(normals.iter()).zip(sums.iter_mut()) {
+        let total = (s.total + s.sum).clamp(-cfg.max_m, cfg.max_m);
         *v += nrm * (total - s.total);
         s.total = total;
         s.new_round();
     }
-    torso::vertex_normals(triangles, &vertices[..n], &mut normals[..n]);
+    torso::vertex_normals(triangles, &vertices[..n], &mut normals[..n], Vector3::z());
     own
 }
 
@@ -218,7 +212,7 @@ pub fn displace(
     for ((v, nrm), s) in vertices[..n].iter_mut().zip(normals.iter()).zip(sums.iter()) {
         *v += nrm * s.total;
     }
-    torso::vertex_normals(triangles, &vertices[..n], &mut normals[..n]);
+    torso::vertex_normals(triangles, &vertices[..n], &mut normals[..n], Vector3::z());
 }
 
 #[cfg(test)]
