@@ -1,10 +1,12 @@
 //! What limits the single-frame shape estimate (issue 10), measured on the VALIDATION part of the training
 //! bodies only: the truth truncated to a few coefficients (the floor of estimating only those), the shape forest
 //! on the subspace coefficients against a ridge regression on the same coefficients (paper Eq. 1 is linear) and a
-//! ridge regression on all canonical pixels (how much the 20-dimensional subspace discards), each with the
-//! canonical views of exact and of noisy salient points.
+//! ridge regression on all canonical pixels (how much the 20-dimensional subspace discards), and the ridge
+//! regression `train shape` fits (the coefficients and the salient points' distances), each with the canonical
+//! views of exact and of noisy salient points.
 //!
-//! `cargo run --release -p supine-models --example shape_limits -- DATASET [--threads N]`
+//! `cargo run --release -p supine-models --example shape_limits -- DATASET [--threads N] [--skip-pixels]`
+//! (`--skip-pixels` leaves out the ridge regressions on all canonical pixels, the slow part.)
 //! Cost: the canonical views of the training bodies (~1 min on 2 cores) and a few n x n solves (n = fit images).
 
 use anyhow::{Context, Result};
@@ -13,6 +15,7 @@ use nalgebra::DMatrix;
 use std::collections::HashMap;
 use supine_core::shape::ShapeModelView;
 use supine_core::shape::canonical::{CanonicalCamera, NO_VALUE};
+use supine_core::shape::linear::{self, LINEAR_INPUTS};
 use supine_models::body::{BodyModel, Shape};
 use supine_models::dataset::Dataset;
 use supine_models::pose::Pose;
@@ -20,6 +23,7 @@ use supine_models::shape::data::{body_pose, train_validation};
 use supine_models::shape::eval::{upper_body, vertex_errors};
 use supine_models::shape::file::write_shape_model;
 use supine_models::shape::forest::{Forest, ForestConfig};
+use supine_models::shape::ridge;
 use supine_models::shape::train::{TrainConfig, canonicals, empty_forest, learn_subspace, project_all};
 
 type V20 = [f32; 20];
@@ -95,6 +99,7 @@ fn main() -> Result<()> {
         let n: usize = args.get(i + 1).context("--threads N")?.parse()?;
         rayon::ThreadPoolBuilder::new().num_threads(n).build_global().ok();
     }
+    let skip_pixels = args.iter().any(|a| a == "--skip-pixels");
     let ds = Dataset::open(std::path::Path::new(dir))?;
     let model = BodyModel::load_default()?;
     let cfg = TrainConfig {
@@ -210,6 +215,27 @@ fn main() -> Result<()> {
                 &yt,
                 &vb,
             );
+        }
+        // The salient points' distances beside the coefficients (`linear::inputs`), as `train shape` fits them.
+        let which = usize::from(label == "noisy points");
+        let li = |idx: &[usize]| -> Vec<[f32; LINEAR_INPUTS]> {
+            idx.iter()
+                .map(|&i| linear::inputs(&co[i], &c.points[i][which]))
+                .collect()
+        };
+        let (lf, lv) = (li(&fi), li(&vi));
+        for lambda in [1e-6f64, 1e-4, 1e-2] {
+            let w = ridge::fit(&lf, &yf, lambda).context("ridge on coefficients and points is singular")?;
+            let est: Vec<V20> = lv.iter().map(|x| ridge::predict(&w, x)).collect();
+            scorer.score(
+                &format!("{label}: ridge on coeffs + point distances, lambda {lambda:e}"),
+                &est,
+                &yt,
+                &vb,
+            );
+        }
+        if skip_pixels {
+            continue;
         }
         let pix = |idx: &[usize]| {
             let filled: Vec<Vec<f32>> = idx.iter().map(|&i| fill(&imgs[i])).collect();

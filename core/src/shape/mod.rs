@@ -17,8 +17,10 @@
 //! LEAF i16  L·20     leaf shape vectors (σ units), quantised
 //! LSCL f32  20       dequantisation scale of each output
 //! CREF u32  1        optional: canonical height reference (0 hip centre, 1 mattress; absent = 0)
-//! LINR f32  21·20    optional: linear shape regression (see linear::ShapeLinear); when present the estimate
-//!                    uses it instead of the forest
+//! LINR f32  21·20    optional: linear shape regression on the coefficients (see linear::ShapeLinear); when
+//!                    present the estimate uses it instead of the forest
+//! LINP f32  25·20    optional: the same on the coefficients and the salient points' distances
+//!                    (linear::point_features); preferred over LINR
 //! ```
 //! Host-only sections (`INFO`: the training report) are ignored here.
 //!
@@ -39,7 +41,7 @@ use crate::model_file::{ModelFile, ModelFileError, Tag};
 use crate::salient::SalientPoint;
 use canonical::{CanonicalCamera, DegenerateFrame, HeightReference};
 use forest::ShapeForest;
-use linear::{LINEAR_LEN, ShapeLinear};
+use linear::{LINEAR_INPUTS, LINEAR_LEN, LINEAR_POINTS_LEN, ShapeLinear};
 use subspace::{ProjectError, SUBSPACE_DIM, Subspace};
 
 /// Kind tag of shape model files.
@@ -55,6 +57,8 @@ pub struct ShapeModelView<'a> {
     subspace: Subspace<'a>,
     forest: ShapeForest<'a>,
     linear: Option<ShapeLinear<'a>>,
+    /// The `LINR` map (coefficients only), kept for [`ShapeModelView::coefficients_only`].
+    linear_coeffs: Option<ShapeLinear<'a>>,
 }
 
 fn invalid(tag: &[u8; 4], what: &'static str) -> ModelFileError {
@@ -132,14 +136,16 @@ impl<'a> ShapeModelView<'a> {
             leaf_scale: file.typed::<f32>(*b"LSCL", Some(SHAPE_COMPONENTS))?,
         };
         forest::validate(&forest).map_err(|what| invalid(b"NFEA", what))?;
-        let linear = match file.typed::<f32>(*b"LINR", Some(LINEAR_LEN)) {
-            Err(ModelFileError::MissingSection { .. }) => None,
-            Err(e) => return Err(e),
+        let linear_section = |tag: Tag, len: usize, inputs: usize| match file.typed::<f32>(tag, Some(len)) {
+            Err(ModelFileError::MissingSection { .. }) => Ok(None),
+            Err(e) => Err(e),
             Ok(w) if !w.iter().all(f32::is_finite) => {
-                return Err(invalid(b"LINR", "non-finite linear regression weight"));
+                Err(invalid(&tag, "non-finite linear regression weight"))
             }
-            Ok(w) => Some(ShapeLinear { w }),
+            Ok(w) => Ok(Some(ShapeLinear { w, inputs })),
         };
+        let linear_points = linear_section(*b"LINP", LINEAR_POINTS_LEN, LINEAR_INPUTS)?;
+        let linear_coeffs = linear_section(*b"LINR", LINEAR_LEN, SUBSPACE_DIM)?;
         Ok(ShapeModelView {
             file,
             camera,
@@ -150,8 +156,19 @@ impl<'a> ShapeModelView<'a> {
                 prior,
             },
             forest,
-            linear,
+            linear: linear_points.or(linear_coeffs),
+            linear_coeffs,
         })
+    }
+
+    /// This model with the regression on the coefficients alone (`LINR`, else the forest) in place of the one on
+    /// the coefficients and the salient points (`LINP`): for callers whose salient points are much worse than the
+    /// ones it was trained with, whose spacing would then mislead it.
+    pub fn coefficients_only(&self) -> Self {
+        ShapeModelView {
+            linear: self.linear_coeffs,
+            ..*self
+        }
     }
 
     /// The validated container.
@@ -184,11 +201,15 @@ impl<'a> ShapeModelView<'a> {
         self.linear.as_ref()
     }
 
-    /// The shape coefficients (σ units) for subspace coefficients `c`: the linear regression if present, else
-    /// the forest.
-    pub fn regress(&self, c: &[f32; SUBSPACE_DIM]) -> [f32; SHAPE_COMPONENTS] {
+    /// The shape coefficients (σ units) for subspace coefficients `c` of a view made with salient points
+    /// `points`: the linear regression if present, else the forest (which reads `c` only).
+    pub fn regress(
+        &self,
+        c: &[f32; SUBSPACE_DIM],
+        points: &[Point3; SalientPoint::COUNT],
+    ) -> [f32; SHAPE_COMPONENTS] {
         match &self.linear {
-            Some(l) => l.predict(c),
+            Some(l) => l.predict(&linear::inputs(c, points)),
             None => self.forest.predict(c),
         }
     }
@@ -209,7 +230,7 @@ impl<'a> ShapeModelView<'a> {
             .map_err(|e| ShapeError::Project(ProjectError::Size(e)))?;
         let (c, visible) = self.subspace.project(canonical).map_err(ShapeError::Project)?;
         Ok(ShapeEstimate {
-            shape: self.regress(&c),
+            shape: self.regress(&c, points),
             subspace: c,
             visible,
             camera_from_body,

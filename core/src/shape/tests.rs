@@ -248,7 +248,7 @@ fn the_height_reference_is_read_and_an_unknown_one_rejected() {
 }
 
 /// The fixture re-written with a `LINR` section of `values` (bytes: f32 little-endian).
-fn with_linear(values: &[u8], out: &mut [u8]) -> usize {
+fn with_linear(extra: &[(&[u8; 4], &[u8])], out: &mut [u8]) -> usize {
     use crate::model_file::{ElemType, SectionData};
     let (buf, n) = tiny();
     let file = ModelFile::parse(&buf[..n], KIND, FORMAT_VERSION).unwrap();
@@ -256,7 +256,7 @@ fn with_linear(values: &[u8], out: &mut [u8]) -> usize {
     let mut sections = [SectionData {
         tag: *b"LINR",
         elem: ElemType::F32,
-        bytes: values,
+        bytes: &[],
     }; 16];
     for (i, d) in sections.iter_mut().enumerate().take(count) {
         let s = file.section_at(i).unwrap();
@@ -266,7 +266,11 @@ fn with_linear(values: &[u8], out: &mut [u8]) -> usize {
             bytes: s.bytes,
         };
     }
-    crate::model_file::write(KIND, FORMAT_VERSION, &sections[..=count], out).unwrap()
+    for (d, (tag, bytes)) in sections[count..].iter_mut().zip(extra) {
+        d.tag = **tag;
+        d.bytes = bytes;
+    }
+    crate::model_file::write(KIND, FORMAT_VERSION, &sections[..count + extra.len()], out).unwrap()
 }
 
 #[test]
@@ -283,32 +287,106 @@ fn a_linear_regression_section_replaces_the_forest_and_bad_ones_are_rejected() {
         b.copy_from_slice(&v.to_le_bytes());
     }
     let mut out = [0u8; 8192];
-    let n = with_linear(&bytes, &mut out);
+    let n = with_linear(&[(b"LINR", &bytes)], &mut out);
     let m = ShapeModelView::parse(&out[..n]).unwrap();
     let mut c = [0.0f32; SUBSPACE_DIM];
     c[3] = 0.5;
-    let s = m.regress(&c);
-    assert!(m.linear().is_some());
+    let pts = salient_square();
+    let s = m.regress(&c, &pts);
+    assert!(m.linear().is_some_and(|l| !l.uses_points()));
     for (j, sj) in s.iter().enumerate() {
         let want = if j == 3 { 1.0 } else { 0.0 } + j as f32 / 10.0;
         assert!((sj - want).abs() < 1e-6, "s[{j}] {sj} vs {want}");
     }
     // Far outside the training views the affine map is held at ±3σ.
     c[3] = 100.0;
-    assert_eq!(m.regress(&c)[3], linear::LINEAR_BOUND);
+    assert_eq!(m.regress(&c, &pts)[3], linear::LINEAR_BOUND);
     c[3] = 0.5;
     // Without the section the forest answers.
     let (buf, k) = tiny();
     let plain = ShapeModelView::parse(&buf[..k]).unwrap();
     assert!(plain.linear().is_none());
-    assert_eq!(plain.regress(&c), plain.forest().predict(&c));
+    assert_eq!(plain.regress(&c, &pts), plain.forest().predict(&c));
     // A non-finite weight or a wrong length is a clear error.
     bytes[8..12].copy_from_slice(&f32::NAN.to_le_bytes());
-    let n = with_linear(&bytes, &mut out);
+    let n = with_linear(&[(b"LINR", &bytes)], &mut out);
     assert!(matches!(
         ShapeModelView::parse(&out[..n]),
         Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"LINR"
     ));
-    let n = with_linear(&bytes[..40], &mut out);
+    let n = with_linear(&[(b"LINR", &bytes[..40])], &mut out);
     assert!(ShapeModelView::parse(&out[..n]).is_err());
+}
+
+/// Salient points of a 0.4 m wide, 0.3 m hip-wide torso 0.5 m long with the head 0.25 m above the shoulders,
+/// 1 m from the camera.
+fn salient_square() -> [Point3; SalientPoint::COUNT] {
+    [
+        Point3::new(0.0, -0.25, 1.0),
+        Point3::new(0.2, 0.0, 1.0),
+        Point3::new(-0.2, 0.0, 1.0),
+        Point3::new(0.0, 0.25, 1.0),
+        Point3::new(0.15, 0.5, 1.0),
+        Point3::new(-0.15, 0.5, 1.0),
+    ]
+}
+
+#[test]
+fn the_point_features_are_the_salient_points_spacing() {
+    let f = linear::point_features(&salient_square());
+    for (got, want) in f.iter().zip([0.4, 0.3, 0.5, 0.25]) {
+        assert!((got - want).abs() < 1e-6, "{f:?}");
+    }
+}
+
+#[test]
+fn a_linear_regression_on_points_reads_the_point_features() {
+    use super::linear::{LINEAR_INPUTS, LINEAR_POINTS_LEN};
+    // s_0 = 10 (shoulder width) - 1 + 0 c; s_j = c_j for the rest.
+    let mut w = [0.0f32; LINEAR_POINTS_LEN];
+    for j in 1..SHAPE_COMPONENTS {
+        w[j * SHAPE_COMPONENTS + j] = 1.0;
+    }
+    w[SUBSPACE_DIM * SHAPE_COMPONENTS] = 10.0;
+    w[LINEAR_INPUTS * SHAPE_COMPONENTS] = -1.0;
+    let mut bytes = [0u8; LINEAR_POINTS_LEN * 4];
+    for (b, v) in bytes.chunks_exact_mut(4).zip(&w) {
+        b.copy_from_slice(&v.to_le_bytes());
+    }
+    let mut out = [0u8; 8192];
+    let n = with_linear(&[(b"LINP", &bytes)], &mut out);
+    let m = ShapeModelView::parse(&out[..n]).unwrap();
+    assert!(m.linear().is_some_and(|l| l.uses_points()));
+    let mut c = [0.0f32; SUBSPACE_DIM];
+    c[2] = 0.7;
+    let s = m.regress(&c, &salient_square());
+    assert!((s[0] - 3.0).abs() < 1e-5, "{}", s[0]);
+    assert!((s[2] - 0.7).abs() < 1e-6);
+    // Beside a LINR map the LINP one is the estimate's; `coefficients_only` takes the LINR one, or the forest.
+    assert_eq!(
+        m.coefficients_only().regress(&c, &salient_square()),
+        m.forest().predict(&c)
+    );
+    let mut r = [0.0f32; LINEAR_LEN];
+    r[SUBSPACE_DIM * SHAPE_COMPONENTS] = 2.5;
+    let mut r_bytes = [0u8; LINEAR_LEN * 4];
+    for (b, v) in r_bytes.chunks_exact_mut(4).zip(&r) {
+        b.copy_from_slice(&v.to_le_bytes());
+    }
+    let mut both_out = [0u8; 12288];
+    let n = with_linear(&[(b"LINR", &r_bytes), (b"LINP", &bytes)], &mut both_out);
+    let both = ShapeModelView::parse(&both_out[..n]).unwrap();
+    assert_eq!(both.regress(&c, &salient_square()), s);
+    let coeffs = both.coefficients_only();
+    assert!(coeffs.linear().is_some_and(|l| !l.uses_points()));
+    assert_eq!(coeffs.regress(&c, &salient_square())[0], 2.5);
+    // A wrong length or a non-finite weight in LINP is refused as in LINR.
+    let n = with_linear(&[(b"LINP", &bytes[..LINEAR_POINTS_LEN * 4 - 4])], &mut out);
+    assert!(ShapeModelView::parse(&out[..n]).is_err());
+    bytes[4..8].copy_from_slice(&f32::INFINITY.to_le_bytes());
+    let n = with_linear(&[(b"LINP", &bytes)], &mut out);
+    assert!(matches!(
+        ShapeModelView::parse(&out[..n]),
+        Err(ModelFileError::InvalidData { tag, .. }) if tag == *b"LINP"
+    ));
 }

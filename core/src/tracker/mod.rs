@@ -113,6 +113,12 @@ pub struct TrackerConfig {
     pub shape_frames: u16,
     /// Whether the init phase refines the shape by model fitting.
     pub refine_shape: bool,
+    /// Whether the init phase's shape estimate reads the salient points' spacing (the shape model's `LINP`
+    /// regression) or the canonical view's coefficients alone (`LINR`). Off: the forest's points on the tracking
+    /// sequences are 50-300 mm off, far worse than the 30 mm the regression was trained with, and on the 46
+    /// validation sequences reading them moved the torso error 10.09 / 6.21 -> 11.07 / 5.87 mm (mean / median) and
+    /// the probe error 8.87 -> 11.08 mm (docs/shape-eval.md, "The salient points' spacing").
+    pub shape_point_features: bool,
     /// A shape known beforehand (σ units; a frozen shape kept over a re-initialise, or a diagnostic): the init
     /// phase then finds only the bed.
     pub known_shape: Option<[f32; SHAPE_COMPONENTS]>,
@@ -223,6 +229,7 @@ impl Default for TrackerConfig {
             budget: BudgetConfig::default(),
             shape_frames: 10,
             refine_shape: true,
+            shape_point_features: false,
             known_shape: None,
             torso_coeffs,
             shape_free_weight: 1e-3,
@@ -850,11 +857,12 @@ impl<'m, 's> Tracker<'m, 's> {
         let Some(observed) = all_points(&points) else {
             return;
         };
-        if let Ok(e) =
-            self.models
-                .shape
-                .estimate(frame, &self.k, &observed, &bed.mattress, self.scratch.canonical)
-        {
+        let shape = if self.cfg.shape_point_features {
+            self.models.shape
+        } else {
+            self.models.shape.coefficients_only()
+        };
+        if let Ok(e) = shape.estimate(frame, &self.k, &observed, &bed.mattress, self.scratch.canonical) {
             for (s, x) in self.init.shape_sum.iter_mut().zip(e.shape) {
                 *s += x;
             }

@@ -68,6 +68,10 @@ pub struct TrackingEvalArgs {
     /// instead of coasting.
     #[arg(long, value_name = "true|false")]
     pub follow_occluded: Option<bool>,
+    /// The tracker's `shape_point_features` (off by default): the init phase's shape estimate reads the salient
+    /// points' spacing (the shape model's `LINP` regression).
+    #[arg(long)]
+    pub shape_point_features: bool,
     /// The tracker's `occluded_hold_rotation` (default: the tracker's, 0.3): while occluded, the temporal fit's
     /// rotation held at the last pose's, weight per data pair (0: off).
     #[arg(long, value_parser = parse_weight)]
@@ -272,6 +276,7 @@ pub fn run_variant(
     if let Some(w) = args.bed_pitch_weight {
         cfg.icp.bed_pitch_weight = w;
     }
+    cfg.shape_point_features = args.shape_point_features;
     if let Some(w) = args.hold_rotation {
         cfg.occluded_hold_rotation = w;
     }

@@ -238,6 +238,7 @@ fn print_table(r: &serde_json::Value) {
     );
     for m in [
         "subspace",
+        "subspace_coeffs",
         "subspace_forest",
         "fitting",
         "combined",

@@ -295,7 +295,9 @@ pub fn evaluate(
         bodies.truncate(cfg.max_bodies);
     }
     // `subspace_forest`: the forest's answer on the same subspace coefficients, for comparison when the model
-    // file's estimate uses its linear regression (the same as `subspace` otherwise).
+    // file's estimate uses its linear regression (the same as `subspace` otherwise); `subspace_coeffs`: the
+    // regression on the coefficients alone (`ShapeModelView::coefficients_only`, what the tracker uses), for
+    // comparison when the estimate's also reads the salient points' distances.
     let names = [
         "subspace",
         "fitting",
@@ -303,6 +305,7 @@ pub fn evaluate(
         "mean_shape",
         "combined_bed",
         "subspace_forest",
+        "subspace_coeffs",
     ];
     let mut all: Vec<Stats> = vec![Stats::default(); names.len()];
     let mut arm: Vec<Stats> = vec![Stats::default(); names.len()];
@@ -431,16 +434,26 @@ pub fn evaluate(
                 None,
                 on_bed.map(|r| r.association),
                 None,
+                None,
             ];
-            let results: [Option<[f32; 20]>; 6] = [
+            let results: [Option<[f32; 20]>; 7] = [
                 Some(est.shape),
                 best.map(|r| r.shape),
                 combined.map(|r| r.shape),
                 Some([0.0; 20]),
                 on_bed.map(|r| r.shape),
                 Some(shape.forest().predict(&est.subspace)),
+                Some(shape.coefficients_only().regress(&est.subspace, &pts)),
             ];
-            let ms = [ms_sub, ms_plain, ms_sub + ms_comb, 0.0, ms_sub + ms_bed, ms_sub];
+            let ms = [
+                ms_sub,
+                ms_plain,
+                ms_sub + ms_comb,
+                0.0,
+                ms_sub + ms_bed,
+                ms_sub,
+                ms_sub,
+            ];
             for m in 0..names.len() {
                 let groups: Vec<&mut Vec<Stats>> = if f.with_arm && f.occluded_fraction <= 0.5 {
                     vec![&mut all, &mut arm]
@@ -502,7 +515,11 @@ pub fn evaluate(
         "canonical": {"width": shape.camera().width, "height": shape.camera().height, "stride": shape.camera().stride,
                        "pitch_m": shape.camera().distance_m / shape.camera().focal_px},
         "model_bytes": shape_bytes.len(),
-        "regressor": if shape.linear().is_some() { "linear" } else { "forest" },
+        "regressor": match shape.linear() {
+            Some(l) if l.uses_points() => "linear_points",
+            Some(_) => "linear",
+            None => "forest",
+        },
         "commit": commit(),
     });
     for (m, name) in names.iter().enumerate() {

@@ -7,7 +7,7 @@ use nalgebra::DMatrix;
 use supine_core::model_file::{ElemType, SectionData, encoded_len, write};
 use supine_core::shape::canonical::CanonicalCamera;
 use supine_core::shape::forest::LEAF_FEATURE;
-use supine_core::shape::linear::LINEAR_LEN;
+use supine_core::shape::linear::{LINEAR_LEN, LINEAR_POINTS_LEN};
 use supine_core::shape::subspace::SUBSPACE_DIM;
 use supine_core::shape::{FORMAT_VERSION, KIND};
 
@@ -39,23 +39,32 @@ pub fn write_shape_model(
     forest: &Forest,
     info: &str,
 ) -> Result<Vec<u8>> {
-    write_shape_model_with_linear(cam, mean, eigen, prior, forest, None, info)
+    write_shape_model_with_linear(cam, mean, eigen, prior, forest, &[], info)
 }
 
-/// [`write_shape_model`] with an optional linear shape regression (`LINR`, layout
-/// [`supine_core::shape::linear::ShapeLinear`]: 21 · 20 values, unquantised), which the estimate then uses.
+/// [`write_shape_model`] with linear shape regressions (layout [`supine_core::shape::linear::ShapeLinear`],
+/// unquantised), which the estimate then uses: `LINR` for 21 · 20 values (the coefficients), `LINP` for 25 · 20
+/// (the coefficients and the salient points' distances); at most one of each.
 pub fn write_shape_model_with_linear(
     cam: &CanonicalCamera,
     mean: &[f32],
     eigen: &DMatrix<f32>,
     prior: &[f32; SUBSPACE_DIM],
     forest: &Forest,
-    linear: Option<&[f32]>,
+    linear: &[&[f32]],
     info: &str,
 ) -> Result<Vec<u8>> {
+    for len in [LINEAR_LEN, LINEAR_POINTS_LEN] {
+        ensure!(
+            linear.iter().filter(|l| l.len() == len).count() <= 1,
+            "at most one linear regression of {len} values"
+        );
+    }
     ensure!(
-        linear.is_none_or(|l| l.len() == LINEAR_LEN),
-        "linear regression must hold {LINEAR_LEN} values"
+        linear
+            .iter()
+            .all(|l| l.len() == LINEAR_LEN || l.len() == LINEAR_POINTS_LEN),
+        "linear regression must hold {LINEAR_LEN} or {LINEAR_POINTS_LEN} values"
     );
     let p = cam.pixels();
     ensure!(
@@ -142,8 +151,13 @@ pub fn write_shape_model_with_linear(
         ),
         (b"INFO", ElemType::U8, info.as_bytes().to_vec()),
     ];
-    if let Some(l) = linear {
-        bufs.push((b"LINR", ElemType::F32, le(l, f32::to_le_bytes)));
+    for l in linear {
+        let tag = if l.len() == LINEAR_POINTS_LEN {
+            b"LINP"
+        } else {
+            b"LINR"
+        };
+        bufs.push((tag, ElemType::F32, le(l, f32::to_le_bytes)));
     }
     let sections: Vec<SectionData<'_>> = bufs
         .iter()

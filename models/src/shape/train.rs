@@ -13,8 +13,10 @@ use nalgebra::DMatrix;
 use rayon::prelude::*;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
+use supine_core::geometry::Point3;
 use supine_core::shape::ShapeModelView;
 use supine_core::shape::canonical::{CanonicalCamera, HeightReference, NO_VALUE, body_frame, canonical_view};
+use supine_core::shape::linear;
 use supine_core::shape::subspace::SUBSPACE_DIM;
 use supine_core::time::Timestamp;
 
@@ -56,6 +58,8 @@ pub struct Canonicals {
     pub shapes: Vec<[f32; DIM]>,
     /// Body of each image.
     pub bodies: Vec<u32>,
+    /// The exact and the noisy salient points of each image (camera frame).
+    pub points: Vec<[[Point3; 6]; 2]>,
 }
 
 /// The canonical view of one depth image (NO_VALUE everywhere if the frame cannot be built).
@@ -76,8 +80,8 @@ pub fn canonical_of(
     out
 }
 
-/// One view's canonical images (exact points, noisy points), its true shape and its body.
-type CanonicalPair = (Vec<f32>, Vec<f32>, [f32; DIM], u32);
+/// One view's canonical images (exact points, noisy points), its true shape, its body and its salient points.
+type CanonicalPair = (Vec<f32>, Vec<f32>, [f32; DIM], u32, [[Point3; 6]; 2]);
 
 /// Canonical images of `bodies`.
 pub fn canonicals(
@@ -97,7 +101,7 @@ pub fn canonicals(
                 .map(|f| {
                     let clean = canonical_of(&f.depth, &k, &f.truth_points, &f.mattress, cam);
                     let noisy = canonical_of(&f.depth, &k, &f.noisy_points, &f.mattress, cam);
-                    (clean, noisy, f.shape, f.body)
+                    (clean, noisy, f.shape, f.body, [f.truth_points, f.noisy_points])
                 })
                 .collect();
             bar.inc(1);
@@ -109,9 +113,11 @@ pub fn canonicals(
         noisy: Vec::new(),
         shapes: Vec::new(),
         bodies: Vec::new(),
+        points: Vec::new(),
     };
     for r in per {
-        for (a, b, s, body) in r? {
+        for (a, b, s, body, pts) in r? {
+            c.points.push(pts);
             c.clean.push(a);
             c.noisy.push(b);
             c.shapes.push(s);
@@ -226,7 +232,7 @@ pub fn mean_nrmse(forest: &Forest, x: &[[f32; DIM]], y: &[[f32; DIM]]) -> f32 {
 }
 
 /// Mean over the first [`SCORED`] coefficients of the normalised RMSE of a regression `f` on (x, y).
-pub fn mean_nrmse_of(f: impl Fn(&[f32; DIM]) -> [f32; DIM], x: &[[f32; DIM]], y: &[[f32; DIM]]) -> f32 {
+pub fn mean_nrmse_of<X>(f: impl Fn(&X) -> [f32; DIM], x: &[X], y: &[[f32; DIM]]) -> f32 {
     let mut se = [0.0f64; SCORED];
     for (c, s) in x.iter().zip(y) {
         let p = f(c);
@@ -292,16 +298,22 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     let coeffs = project_all(&sub_view, &c.noisy);
     let is_val = |b: u32| val_b.contains(&b);
     let (mut xf, mut yf, mut xv, mut yv, mut xa, mut ya) = (vec![], vec![], vec![], vec![], vec![], vec![]);
-    for ((cf, s), &b) in coeffs.iter().zip(&c.shapes).zip(&c.bodies) {
+    // The linear regression's inputs: the coefficients and the (noisy) salient points' distances.
+    let (mut lf, mut lv, mut la) = (vec![], vec![], vec![]);
+    for (((cf, s), &b), pts) in coeffs.iter().zip(&c.shapes).zip(&c.bodies).zip(&c.points) {
         let Some(cf) = cf else { continue };
+        let li = linear::inputs(cf, &pts[1]);
         xa.push(*cf);
         ya.push(*s);
+        la.push(li);
         if is_val(b) {
             xv.push(*cf);
             yv.push(*s);
+            lv.push(li);
         } else {
             xf.push(*cf);
             yf.push(*s);
+            lf.push(li);
         }
     }
     // Choice on the validation bodies: the leaf size.
@@ -332,30 +344,51 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     } else {
         Forest::train(&xa, &ya, &fc)
     };
-    // The linear regression (ridge) on the same inputs, its penalty chosen on the validation bodies; it replaces
-    // the forest in the file when it scores better there (it did on every run so far: docs/shape-eval.md).
-    let mut ridge_choices = Vec::new();
-    let mut best_ridge = (f32::INFINITY, 0.0f64);
-    for lambda in [1e-4f64, 1e-3, 1e-2, 3e-2, 1e-1, 3e-1] {
-        let Some(w) = super::ridge::fit(&xf, &yf, lambda) else {
-            continue;
-        };
-        let e = mean_nrmse_of(|c| super::ridge::predict(&w, c), &xv, &yv);
-        ridge_choices.push(serde_json::json!({"lambda": lambda, "validation_mean_nrmse": e}));
-        if e < best_ridge.0 {
-            best_ridge = (e, lambda);
+    // The linear regressions (ridge), each penalty chosen on the validation bodies: on the coefficients (`LINR`)
+    // and on the coefficients and the salient points' distances (`LINP`, the estimate's when present). They
+    // replace the forest in the file when they score better there (they did on every run so far:
+    // docs/shape-eval.md).
+    fn ridge_choice<const N: usize>(
+        xf: &[[f32; N]],
+        yf: &[[f32; DIM]],
+        xv: &[[f32; N]],
+        yv: &[[f32; DIM]],
+    ) -> (f32, f64, Vec<serde_json::Value>) {
+        let mut choices = Vec::new();
+        let mut best = (f32::INFINITY, 0.0f64);
+        // Down to 1e-6: the point features (metres, SD ~2 cm) vary far less than the coefficients, so the
+        // penalty scaled to the inputs' mean variance weighs on them much harder.
+        for lambda in [1e-6f64, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 3e-1] {
+            let Some(w) = super::ridge::fit(xf, yf, lambda) else {
+                continue;
+            };
+            let e = mean_nrmse_of(|x| super::ridge::predict(&w, x), xv, yv);
+            choices.push(serde_json::json!({"lambda": lambda, "validation_mean_nrmse": e}));
+            if e < best.0 {
+                best = (e, lambda);
+            }
         }
+        (best.0, best.1, choices)
     }
-    let linear = if best_ridge.0 < best.0 {
+    let (coeffs_score, coeffs_lambda, coeffs_choices) = ridge_choice(&xf, &yf, &xv, &yv);
+    let (points_score, points_lambda, points_choices) = ridge_choice(&lf, &yf, &lv, &yv);
+    let mut linear = Vec::new();
+    if coeffs_score < best.0 {
         let (x, y) = if cfg.holdout_validation {
             (&xf, &yf)
         } else {
             (&xa, &ya)
         };
-        Some(super::ridge::fit(x, y, best_ridge.1).context("ridge regression is singular")?)
-    } else {
-        None
-    };
+        linear.push(super::ridge::fit(x, y, coeffs_lambda).context("ridge regression is singular")?);
+    }
+    if points_score < best.0 {
+        let (x, y) = if cfg.holdout_validation {
+            (&lf, &yf)
+        } else {
+            (&la, &ya)
+        };
+        linear.push(super::ridge::fit(x, y, points_lambda).context("ridge regression is singular")?);
+    }
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
@@ -366,9 +399,15 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "fit_bodies": fit_b.len(),
         "validation_bodies": val_b.len(),
         "validation_choices": choices,
-        "ridge_choices": ridge_choices,
-        "regressor": if linear.is_some() { "linear" } else { "forest" },
-        "ridge_lambda": best_ridge.1,
+        "ridge_choices": coeffs_choices,
+        "ridge_lambda": coeffs_lambda,
+        "ridge_points_choices": points_choices,
+        "ridge_points_lambda": points_lambda,
+        "regressor": match (points_score < best.0, coeffs_score < best.0) {
+            (true, _) => "linear_points",
+            (false, true) => "linear",
+            _ => "forest",
+        },
         "nodes": forest.node_count(),
     });
     // The file's provenance leaves the wall time out, so equal seeds give byte-identical files.
@@ -378,7 +417,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         &eigen,
         &prior,
         &forest,
-        linear.as_deref(),
+        &linear.iter().map(Vec::as_slice).collect::<Vec<_>>(),
         &report.to_string(),
     )?;
     let mut report = report;
@@ -417,11 +456,13 @@ mod tests {
         assert_eq!(view.forest().tree_count(), 3);
         // Whichever regression validation chose, the estimate uses it.
         let c = [0.3f32; 20];
+        let pts: [Point3; 6] =
+            std::array::from_fn(|i| Point3::new(0.1 * i as f32, 0.05 * (i * i) as f32, 1.5));
         let expect = match view.linear() {
-            Some(l) => l.predict(&c),
+            Some(l) => l.predict(&linear::inputs(&c, &pts)),
             None => view.forest().predict(&c),
         };
-        assert_eq!(view.regress(&c), expect);
+        assert_eq!(view.regress(&c, &pts), expect);
         let model = BodyModel::load_default().unwrap();
         let ec = EvalConfig {
             seed: 1,
