@@ -69,8 +69,10 @@ pub struct EvalShapeArgs {
     /// Per-axis SD of the salient-point noise, millimetres.
     #[arg(long, default_value_t = 30.0)]
     pub point_noise_mm: f32,
-    /// Residual unit of Eq. 7, millimetres.
-    #[arg(long, default_value_t = 10.0)]
+    /// Residual unit of Eq. 7, millimetres (how hard the data pull against λ and Λ): 2.5, chosen on the
+    /// validation bodies with round 5's estimate as the start (combined 10 / 5 / 3.5 / 2.5 / 1.5 / 1 mm gave 9.5 /
+    /// 9.2 / 9.1 / 9.0 / 9.1 / 9.6 mm; docs/shape-eval.md). The tracker's fits keep `FitParams`' 10 mm.
+    #[arg(long, default_value_t = 2.5)]
     pub length_unit_mm: f32,
     /// Starts of the plain model fit (0 skips the plain fit).
     #[arg(long, default_value_t = 5)]
