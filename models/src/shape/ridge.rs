@@ -1,8 +1,9 @@
 //! Trainer of the linear shape regression (`LINP`/`LINR`, [`supine_core::shape::linear`]): ridge regression from
 //! the regression inputs (the 20 subspace coefficients, and for `LINP` the salient points' distances) to the 20
 //! shape coefficients (σ units), with an unpenalised bias. The penalty is `lambda` times the mean diagonal of the
-//! centred inputs' Gram matrix, so one grid of `lambda` serves any input scale. Cost: one pass of N x N outer
-//! products over the samples and an N x N Cholesky solve.
+//! centred inputs' Gram matrix, so one grid of `lambda` serves any common input scale; inputs of mixed scales (the
+//! coefficients and the distances of `LINP`) need smaller `lambda` for the small ones, hence the trainer's grid
+//! down to 1e-6. Cost: one pass of N x N outer products over the samples and an N x N Cholesky solve.
 
 use nalgebra::{DMatrix, DVector};
 use supine_core::shape::linear::LINEAR_BOUND;
