@@ -248,6 +248,13 @@ fn the_height_reference_is_read_and_an_unknown_one_rejected() {
 }
 
 /// The fixture re-written with a `LINR` section of `values` (bytes: f32 little-endian).
+/// `values` as little-endian f32 bytes into `out` (four bytes each).
+fn le_f32(values: &[f32], out: &mut [u8]) {
+    for (b, v) in out.chunks_exact_mut(4).zip(values) {
+        b.copy_from_slice(&v.to_le_bytes());
+    }
+}
+
 fn with_linear(extra: &[(&[u8; 4], &[u8])], out: &mut [u8]) -> usize {
     use crate::model_file::{ElemType, SectionData};
     let (buf, n) = tiny();
@@ -283,9 +290,7 @@ fn a_linear_regression_section_replaces_the_forest_and_bad_ones_are_rejected() {
         w[SUBSPACE_DIM * SHAPE_COMPONENTS + j] = j as f32 / 10.0;
     }
     let mut bytes = [0u8; LINEAR_LEN * 4];
-    for (b, v) in bytes.chunks_exact_mut(4).zip(&w) {
-        b.copy_from_slice(&v.to_le_bytes());
-    }
+    le_f32(&w, &mut bytes);
     let mut out = [0u8; 8192];
     let n = with_linear(&[(b"LINR", &bytes)], &mut out);
     let m = ShapeModelView::parse(&out[..n]).unwrap();
@@ -350,9 +355,7 @@ fn a_linear_regression_on_points_reads_the_point_features() {
     w[SUBSPACE_DIM * SHAPE_COMPONENTS] = 10.0;
     w[LINEAR_INPUTS * SHAPE_COMPONENTS] = -1.0;
     let mut bytes = [0u8; LINEAR_POINTS_LEN * 4];
-    for (b, v) in bytes.chunks_exact_mut(4).zip(&w) {
-        b.copy_from_slice(&v.to_le_bytes());
-    }
+    le_f32(&w, &mut bytes);
     let mut out = [0u8; 8192];
     let n = with_linear(&[(b"LINP", &bytes)], &mut out);
     let m = ShapeModelView::parse(&out[..n]).unwrap();
@@ -370,9 +373,7 @@ fn a_linear_regression_on_points_reads_the_point_features() {
     let mut r = [0.0f32; LINEAR_LEN];
     r[SUBSPACE_DIM * SHAPE_COMPONENTS] = 2.5;
     let mut r_bytes = [0u8; LINEAR_LEN * 4];
-    for (b, v) in r_bytes.chunks_exact_mut(4).zip(&r) {
-        b.copy_from_slice(&v.to_le_bytes());
-    }
+    le_f32(&r, &mut r_bytes);
     let mut both_out = [0u8; 12288];
     let n = with_linear(&[(b"LINR", &r_bytes), (b"LINP", &bytes)], &mut both_out);
     let both = ShapeModelView::parse(&both_out[..n]).unwrap();

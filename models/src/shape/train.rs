@@ -243,6 +243,49 @@ pub fn mean_nrmse_of<X>(f: impl Fn(&X) -> [f32; DIM], x: &[X], y: &[[f32; DIM]])
     (se.iter().map(|e| (e / x.len().max(1) as f64).sqrt()).sum::<f64>() / SCORED as f64) as f32
 }
 
+/// A ridge regression's penalty chosen on validation data, and its weights fitted with that penalty.
+struct RidgeChoice {
+    /// The validation mean NRMSE of s0..s4 at the chosen penalty (infinite, and no weights, when no fit worked).
+    score: f32,
+    lambda: f64,
+    /// Every penalty tried and its score, for the report.
+    choices: Vec<serde_json::Value>,
+    weights: Vec<f32>,
+}
+
+/// The ridge penalty that scores best on `val` when fitted on `fit`, and the weights fitted on `fin` with it.
+/// The grid reaches 1e-6: the point features (metres, SD ~2 cm) vary far less than the coefficients, so the
+/// penalty scaled to the inputs' mean variance weighs on them much harder.
+fn ridge_choice<const N: usize>(
+    fit: (&[[f32; N]], &[[f32; DIM]]),
+    val: (&[[f32; N]], &[[f32; DIM]]),
+    fin: (&[[f32; N]], &[[f32; DIM]]),
+) -> Result<RidgeChoice> {
+    let mut choices = Vec::new();
+    let mut best = (f32::INFINITY, 0.0f64);
+    for lambda in [1e-6f64, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 3e-1] {
+        let Some(w) = super::ridge::fit(fit.0, fit.1, lambda) else {
+            continue;
+        };
+        let e = mean_nrmse_of(|x| super::ridge::predict(&w, x), val.0, val.1);
+        choices.push(serde_json::json!({"lambda": lambda, "validation_mean_nrmse": e}));
+        if e < best.0 {
+            best = (e, lambda);
+        }
+    }
+    let weights = if best.0.is_finite() {
+        super::ridge::fit(fin.0, fin.1, best.1).context("ridge regression is singular")?
+    } else {
+        Vec::new()
+    };
+    Ok(RidgeChoice {
+        score: best.0,
+        lambda: best.1,
+        choices,
+        weights,
+    })
+}
+
 /// Everything `train shape` produces.
 pub struct Trained {
     /// The model file.
@@ -348,47 +391,22 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
     // and on the coefficients and the salient points' distances (`LINP`, the estimate's when present). They
     // replace the forest in the file when they score better there (they did on every run so far:
     // docs/shape-eval.md).
-    fn ridge_choice<const N: usize>(
-        xf: &[[f32; N]],
-        yf: &[[f32; DIM]],
-        xv: &[[f32; N]],
-        yv: &[[f32; DIM]],
-    ) -> (f32, f64, Vec<serde_json::Value>) {
-        let mut choices = Vec::new();
-        let mut best = (f32::INFINITY, 0.0f64);
-        // Down to 1e-6: the point features (metres, SD ~2 cm) vary far less than the coefficients, so the
-        // penalty scaled to the inputs' mean variance weighs on them much harder.
-        for lambda in [1e-6f64, 1e-5, 1e-4, 1e-3, 1e-2, 3e-2, 1e-1, 3e-1] {
-            let Some(w) = super::ridge::fit(xf, yf, lambda) else {
-                continue;
-            };
-            let e = mean_nrmse_of(|x| super::ridge::predict(&w, x), xv, yv);
-            choices.push(serde_json::json!({"lambda": lambda, "validation_mean_nrmse": e}));
-            if e < best.0 {
-                best = (e, lambda);
-            }
-        }
-        (best.0, best.1, choices)
-    }
-    let (coeffs_score, coeffs_lambda, coeffs_choices) = ridge_choice(&xf, &yf, &xv, &yv);
-    let (points_score, points_lambda, points_choices) = ridge_choice(&lf, &yf, &lv, &yv);
-    let mut linear = Vec::new();
-    if coeffs_score < best.0 {
-        let (x, y) = if cfg.holdout_validation {
-            (&xf, &yf)
-        } else {
-            (&xa, &ya)
-        };
-        linear.push(super::ridge::fit(x, y, coeffs_lambda).context("ridge regression is singular")?);
-    }
-    if points_score < best.0 {
-        let (x, y) = if cfg.holdout_validation {
-            (&lf, &yf)
-        } else {
-            (&la, &ya)
-        };
-        linear.push(super::ridge::fit(x, y, points_lambda).context("ridge regression is singular")?);
-    }
+    let holdout = cfg.holdout_validation;
+    let coeffs = ridge_choice(
+        (&xf, &yf),
+        (&xv, &yv),
+        if holdout { (&xf, &yf) } else { (&xa, &ya) },
+    )?;
+    let points = ridge_choice(
+        (&lf, &yf),
+        (&lv, &yv),
+        if holdout { (&lf, &yf) } else { (&la, &ya) },
+    )?;
+    let linear: Vec<&[f32]> = [&coeffs, &points]
+        .into_iter()
+        .filter(|r| r.score < best.0)
+        .map(|r| r.weights.as_slice())
+        .collect();
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
@@ -399,11 +417,11 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "fit_bodies": fit_b.len(),
         "validation_bodies": val_b.len(),
         "validation_choices": choices,
-        "ridge_choices": coeffs_choices,
-        "ridge_lambda": coeffs_lambda,
-        "ridge_points_choices": points_choices,
-        "ridge_points_lambda": points_lambda,
-        "regressor": match (points_score < best.0, coeffs_score < best.0) {
+        "ridge_choices": coeffs.choices,
+        "ridge_lambda": coeffs.lambda,
+        "ridge_points_choices": points.choices,
+        "ridge_points_lambda": points.lambda,
+        "regressor": match (points.score < best.0, coeffs.score < best.0) {
             (true, _) => "linear_points",
             (false, true) => "linear",
             _ => "forest",
@@ -411,15 +429,8 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "nodes": forest.node_count(),
     });
     // The file's provenance leaves the wall time out, so equal seeds give byte-identical files.
-    let bytes = write_shape_model_with_linear(
-        &cam,
-        &mean,
-        &eigen,
-        &prior,
-        &forest,
-        &linear.iter().map(Vec::as_slice).collect::<Vec<_>>(),
-        &report.to_string(),
-    )?;
+    let bytes =
+        write_shape_model_with_linear(&cam, &mean, &eigen, &prior, &forest, &linear, &report.to_string())?;
     let mut report = report;
     report["seconds"] = t0.elapsed().as_secs_f32().into();
     ShapeModelView::parse(&bytes)
