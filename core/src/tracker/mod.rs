@@ -395,13 +395,12 @@ struct Init {
     refit_pose: Option<Isometry3>,
     /// Frames with a pose while lock refits wait ([`TrackerConfig::refit_late_frames`]).
     waited: u16,
-    /// Consecutive good tracked frames ([`TrackerConfig::refit_settle_frames`]).
+    /// Consecutive good tracked frames with the current torso model ([`TrackerConfig::refit_settle_frames`],
+    /// [`SurfaceConfig::settle_frames`]).
     settled: u16,
     /// Lock refit rounds completed after the first ([`TrackerConfig::refit_rounds`]).
     round: u8,
-    /// Good tracked frames since the torso model was last adopted, frames the surface adaptation's round has summed
-    /// since, and its rounds applied.
-    surface_wait: u16,
+    /// Frames the surface adaptation's round has summed, and its rounds applied.
     surface_n: u16,
     surface_rounds: u8,
 }
@@ -419,7 +418,6 @@ impl Init {
             waited: 0,
             settled: 0,
             round: 0,
-            surface_wait: 0,
             surface_n: 0,
             surface_rounds: 0,
         }
@@ -577,6 +575,15 @@ impl<'m, 's> Tracker<'m, 's> {
         check("torso_vertices", sizes.torso, scratch.torso_vertices.len())?;
         check("torso_normals", sizes.torso, scratch.torso_normals.len())?;
         check("torso_regions", sizes.torso, scratch.torso_regions.len())?;
+        // The init phase's shape regression, chosen once (`TrackerConfig::shape_point_features`).
+        let models = Models {
+            shape: if cfg.shape_point_features {
+                models.shape
+            } else {
+                models.shape.coefficients_only()
+            },
+            ..models
+        };
         Ok(Tracker {
             models,
             k,
@@ -857,12 +864,11 @@ impl<'m, 's> Tracker<'m, 's> {
         let Some(observed) = all_points(&points) else {
             return;
         };
-        let shape = if self.cfg.shape_point_features {
-            self.models.shape
-        } else {
-            self.models.shape.coefficients_only()
-        };
-        if let Ok(e) = shape.estimate(frame, &self.k, &observed, &bed.mattress, self.scratch.canonical) {
+        if let Ok(e) =
+            self.models
+                .shape
+                .estimate(frame, &self.k, &observed, &bed.mattress, self.scratch.canonical)
+        {
             for (s, x) in self.init.shape_sum.iter_mut().zip(e.shape) {
                 *s += x;
             }
@@ -959,8 +965,7 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) {
-        if watch.elapsed(clock) > self.cfg.budget.frame_us / 2 {
-            self.counters.refinements_skipped += 1;
+        if !self.refinement_fits(clock, watch) {
             return;
         }
         self.init.refits_left -= 1;
@@ -1005,7 +1010,6 @@ impl<'m, 's> Tracker<'m, 's> {
             self.init.refit_sum = [0.0; SHAPE_COMPONENTS];
             self.init.refit_n = 0;
             self.init.refit_pose = None;
-            self.init.settled = 0;
         }
     }
 
@@ -1021,8 +1025,7 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) {
-        if watch.elapsed(clock) > self.cfg.budget.frame_us / 2 {
-            self.counters.refinements_skipped += 1;
+        if !self.refinement_fits(clock, watch) {
             return;
         }
         let cfg = self.cfg.surface;
@@ -1067,10 +1070,21 @@ impl<'m, 's> Tracker<'m, 's> {
         self.support_ref = None;
     }
 
+    /// Whether a torso model revision (a lock refit, a surface adaptation frame) may run in this frame: only while
+    /// the frame has used at most half its budget; otherwise it waits for a later frame, counted as skipped.
+    fn refinement_fits(&mut self, clock: &(impl Clock + ?Sized), watch: &Stopwatch) -> bool {
+        let fits = watch.elapsed(clock) <= self.cfg.budget.frame_us / 2;
+        if !fits {
+            self.counters.refinements_skipped += 1;
+        }
+        fits
+    }
+
     /// Make `torso` the tracked model at `pose`: a new shape revision, announced on the next frame.
     fn adopt_torso(&mut self, torso: TorsoModel, pose: Option<Isometry3>) {
-        // A round in progress measured against the previous model: start it again.
-        self.init.surface_wait = 0;
+        // The tracker settles with the new model, and a surface round in progress measured against the previous
+        // one starts again.
+        self.init.settled = 0;
         self.init.surface_n = 0;
         self.pose = pose;
         self.torso = Some(torso);
@@ -1103,7 +1117,7 @@ impl<'m, 's> Tracker<'m, 's> {
         for (i, r) in raw.iter_mut().enumerate() {
             *r = z[i] * body.sigma(i);
         }
-        let built = TorsoSurface::build(
+        let body_from_torso = TorsoSurface::build(
             &body,
             &raw,
             TorsoBuffers {
@@ -1112,15 +1126,15 @@ impl<'m, 's> Tracker<'m, 's> {
                 regions: self.scratch.torso_regions,
             },
         )
-        .ok()
-        .map(|s| (s.body_from_torso(), raw));
+        .ok()?
+        .body_from_torso();
         surface::displace(
             body.torso_subset_triangles(),
             self.scratch.torso_vertices,
             self.scratch.torso_normals,
             self.scratch.surface_sums,
         );
-        built
+        Some((body_from_torso, raw))
     }
 
     /// Where the shape refinement starts (`camera_from_body`): the forest's points place the model up to 20 cm and
@@ -1367,11 +1381,6 @@ impl<'m, 's> Tracker<'m, 's> {
         } else {
             self.init.settled = 0;
         }
-        if quality == FitQuality::Good && self.machine.state() == TrackerState::Tracking {
-            self.init.surface_wait = self.init.surface_wait.saturating_add(1);
-        } else {
-            self.init.surface_wait = 0;
-        }
         if quality == FitQuality::Good
             && variant != Variant::Forest
             && self.init.refits_left > 0
@@ -1386,7 +1395,7 @@ impl<'m, 's> Tracker<'m, 's> {
         if variant != Variant::Forest
             && self.cfg.surface.frames > 0
             && self.init.surface_rounds < self.cfg.surface.rounds
-            && self.init.surface_wait > self.cfg.surface.settle_frames
+            && self.init.settled > self.cfg.surface.settle_frames
             && report.fit.visible >= self.cfg.surface.min_visible
             && let Some(pose) = self.pose
         {
