@@ -242,9 +242,18 @@ fn evaluation_reports_every_method() {
             method: Method::Refined,
         },
     ];
-    let (table, images) =
-        evaluate(&ds, &cands, 0, 256, supine_core::tracker::FOREST_CEILING_M, false).unwrap();
+    let ev = evaluate(&ds, &cands, 0, 256, supine_core::tracker::FOREST_CEILING_M, false).unwrap();
+    let (table, images) = (ev.table, ev.images);
     assert_eq!(images, ds.test.len() * 2);
+    // Quantised against float: every view with both answers is counted, 5 cm apart implies 2 cm apart.
+    let apart = ev.apart.expect("refined and quantised were both evaluated");
+    let [all_views, arm_views, no_arm_views] = apart;
+    for ((all, arm), no_arm) in all_views.iter().zip(&arm_views).zip(&no_arm_views) {
+        assert_eq!(all.both, arm.both + no_arm.both);
+        assert_eq!(all.over_2cm, arm.over_2cm + no_arm.over_2cm);
+        assert!(all.over_5cm <= all.over_2cm && all.over_2cm <= all.both);
+        assert!(all.both as usize <= images && all.both > 0);
+    }
     let json = supine_models::forest::eval::methods_json(&cands, &table);
     for m in ["baseline", "refined", "quantised"] {
         let e = json[m]["mean_error_mm"].as_f64().unwrap();

@@ -2,14 +2,14 @@
 //! (wall time, peak memory, choices) and the evaluation report (stdout table, `--json`, `--png`).
 
 use super::chart::{Panel, bar_chart};
-use super::eval::{Candidate, evaluate, methods_json, text_table};
+use super::eval::{Candidate, apart_json, apart_text, evaluate, methods_json, text_table};
 use super::refine::RefineParams;
 use super::sidecar::FloatLeaves;
 use super::train::{TrainConfig, train_on};
 use super::tree::TreeParams;
 use crate::dataset::Dataset;
 use anyhow::{Context, Result, ensure};
-use serde_json::json;
+use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use supine_core::forest::infer::Method;
 use supine_core::forest::model::ForestView;
@@ -549,10 +549,15 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
         model: &view,
         method: Method::Refined,
     });
-    let (table, images) =
-        pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, a.ceiling_m, true))?;
+    let ev = pool(a.threads)?.install(|| evaluate(&ds, &cands, a.seed, samples, a.ceiling_m, true))?;
+    let (table, images) = (ev.table, ev.images);
     print!("{}", text_table(&cands, &table));
     let mut report = methods_json(&cands, &table);
+    // Only meaningful against the float leaves (without them `refined` is the quantised file itself).
+    if let (Some(apart), Some(_)) = (&ev.apart, &float) {
+        print!("{}", apart_text(apart));
+        report.insert("quantisation".into(), Value::Object(apart_json(apart)));
+    }
     let commit = commit();
     report.insert("seed".into(), json!(a.seed));
     report.insert("images".into(), json!(images));
@@ -569,10 +574,7 @@ pub fn run_eval(a: &EvalJointsArgs) -> Result<()> {
                "views": ds.manifest.config.views, "seed": ds.manifest.config.seed,
                "body_source": ds.manifest.body_source}),
     );
-    if let Some(m) = view
-        .meta()
-        .and_then(|m| serde_json::from_str::<serde_json::Value>(m).ok())
-    {
+    if let Some(m) = view.meta().and_then(|m| serde_json::from_str::<Value>(m).ok()) {
         report.insert("model_meta".into(), m);
     }
     println!(

@@ -1,7 +1,10 @@
 //! Evaluation of joint forests on the held-out test bodies (paper Fig. 6): per method and salient point the
 //! detection rate within 3 cm (Fig. 6a) and within 10 cm (Shotton/Girshick), the RMSE (Fig. 6b) and the mean 3D
 //! error, over all views and apart for views with and without the robot arm. Single frames, no prior. Every
-//! method sees the same sampled pixels of a view (same seed). Cost: one inference per view and method.
+//! method sees the same sampled pixels of a view (same seed). Where both `refined` (float leaves) and `quantised`
+//! are evaluated, it also counts the views where the two answer more than 2 cm / 5 cm apart: the quantisation's
+//! cost in views that change, which a few gross-error flips hide in an RMSE. Cost: one inference per view and
+//! method.
 
 use super::data::{clip_for, view_planes};
 use super::train::image_seed;
@@ -93,7 +96,41 @@ impl Acc {
 /// `acc[method][subset][point]`.
 pub type Table = Vec<[[Acc; P]; 3]>;
 
-/// Evaluate `cands` on the test split of `ds`; returns the table and the number of test views.
+/// Views where `quantised` answers apart from `refined`, per subset and point.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Apart {
+    /// Views where both give an estimate.
+    pub both: u32,
+    /// Of those, the ones more than 2 cm apart.
+    pub over_2cm: u32,
+    /// Of those, the ones more than 5 cm apart.
+    pub over_5cm: u32,
+}
+
+impl Apart {
+    fn add(&mut self, d: f32) {
+        self.both += 1;
+        self.over_2cm += u32::from(d > 0.02);
+        self.over_5cm += u32::from(d > 0.05);
+    }
+    fn merge(&mut self, o: &Apart) {
+        self.both += o.both;
+        self.over_2cm += o.over_2cm;
+        self.over_5cm += o.over_5cm;
+    }
+}
+
+/// What [`evaluate`] measured.
+pub struct Evaluation {
+    /// Per method, subset and point.
+    pub table: Table,
+    /// `quantised` against `refined` (`apart[subset][point]`), when both were evaluated.
+    pub apart: Option<[[Apart; P]; 3]>,
+    /// Test views.
+    pub images: usize,
+}
+
+/// Evaluate `cands` on the test split of `ds`.
 pub fn evaluate(
     ds: &Dataset,
     cands: &[Candidate<'_>],
@@ -101,8 +138,10 @@ pub fn evaluate(
     samples: usize,
     ceiling_m: f32,
     progress: bool,
-) -> Result<(Table, usize)> {
+) -> Result<Evaluation> {
     ensure!(!ds.test.is_empty(), "the dataset has no test bodies");
+    let index = |name| cands.iter().position(|c| c.name == name);
+    let pair = index("refined").zip(index("quantised"));
     let k = Intrinsics::KINECT_V1;
     let bar = ProgressBar::with_draw_target(
         Some(ds.test.len() as u64),
@@ -118,13 +157,14 @@ pub fn evaluate(
     );
     bar.set_message("eval bodies");
     let mut table: Table = vec![[[Acc::default(); P]; 3]; cands.len()];
+    let mut apart = [[Apart::default(); P]; 3];
     let mut images = 0usize;
     for chunk in ds.test.chunks(8) {
         let recs: Vec<_> = chunk.par_iter().map(|&b| ds.read_body(b)).collect();
         for rec in recs {
             let rec = rec?;
             let body = rec.truth.body_index;
-            let per_view: Vec<Table> = rec
+            let per_view: Vec<(Table, [[Apart; P]; 3])> = rec
                 .views
                 .par_iter()
                 .map_init(
@@ -132,10 +172,12 @@ pub fn evaluate(
                     |ws, v| {
                         let full = v.full_depth(k.width as usize, k.height as usize);
                         let mut t: Table = vec![[[Acc::default(); P]; 3]; cands.len()];
+                        let mut a = [[Apart::default(); P]; 3];
                         let Ok(frame) = DepthFrame::new(&full, k.width, k.height, Timestamp::default(), 0)
                         else {
-                            return t;
+                            return (t, a);
                         };
+                        let mut answers = vec![[None; P]; cands.len()];
                         let planes = view_planes(&v.truth);
                         let clip = clip_for(&planes, &k);
                         let sub = if v.truth.probe.is_some() { 1 } else { 2 };
@@ -152,6 +194,7 @@ pub fn evaluate(
                                 estimate(c.model, &frame, &k, &clip, &cfg, &[None; P], ws)
                             };
                             for p in 0..P {
+                                answers[ci][p] = est[p].map(|x| x.position);
                                 let e = est[p].map(|x| {
                                     (x.position.coords - nalgebra::Vector3::from(v.truth.salient_camera[p]))
                                         .norm()
@@ -160,17 +203,27 @@ pub fn evaluate(
                                 t[ci][sub][p].add(e);
                             }
                         }
-                        t
+                        if let Some((r, q)) = pair {
+                            for p in 0..P {
+                                if let (Some(x), Some(y)) = (answers[r][p], answers[q][p]) {
+                                    let d = (x - y).norm();
+                                    a[0][p].add(d);
+                                    a[sub][p].add(d);
+                                }
+                            }
+                        }
+                        (t, a)
                     },
                 )
                 .collect();
             images += per_view.len();
-            for t in per_view {
-                for (ci, m) in t.iter().enumerate() {
-                    for s in 0..3 {
-                        for p in 0..P {
+            for (t, a) in per_view {
+                for s in 0..3 {
+                    for p in 0..P {
+                        for (ci, m) in t.iter().enumerate() {
                             table[ci][s][p].merge(&m[s][p]);
                         }
+                        apart[s][p].merge(&a[s][p]);
                     }
                 }
             }
@@ -178,7 +231,53 @@ pub fn evaluate(
         }
     }
     bar.finish_and_clear();
-    Ok((table, images))
+    Ok(Evaluation {
+        table,
+        apart: pair.map(|_| apart),
+        images,
+    })
+}
+
+/// The report's `quantisation` JSON: per subset and point, views where `quantised` and `refined` answer more
+/// than 2 cm / 5 cm apart.
+pub fn apart_json(apart: &[[Apart; P]; 3]) -> Map<String, Value> {
+    let mut out = Map::new();
+    for (si, sub) in SUBSETS.iter().enumerate() {
+        let mut m = Map::new();
+        for (p, a) in apart[si].iter().enumerate() {
+            m.insert(
+                SalientPoint::ALL[p].name().into(),
+                json!({"views": a.both, "apart_2cm": a.over_2cm, "apart_5cm": a.over_5cm}),
+            );
+        }
+        out.insert((*sub).into(), Value::Object(m));
+    }
+    out
+}
+
+/// The stdout lines for [`apart_json`].
+pub fn apart_text(apart: &[[Apart; P]; 3]) -> String {
+    let mut s = String::from(
+        "
+[quantised vs refined: views more than 2 cm / 5 cm apart]
+",
+    );
+    s += &format!("{:<12}", "subset");
+    for p in SalientPoint::ALL {
+        s += &format!(" {:>15}", p.name());
+    }
+    s.push('\n');
+    for (si, sub) in SUBSETS.iter().enumerate() {
+        s += &format!("{sub:<12}");
+        for a in &apart[si] {
+            s += &format!(
+                " {:>15}",
+                format!("{} / {} of {}", a.over_2cm, a.over_5cm, a.both)
+            );
+        }
+        s.push('\n');
+    }
+    s
 }
 
 fn round(x: f64, d: i32) -> f64 {
