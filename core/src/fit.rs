@@ -43,6 +43,9 @@ pub struct FitParams {
     pub stride: u16,
     /// Association parameters.
     pub icp: IcpParams,
+    /// Coarse to fine: from the second round on, pairs farther apart than this are dropped (at most
+    /// `icp.max_distance_m`, which the first round uses); `None` keeps `icp.max_distance_m` throughout.
+    pub fine_distance_m: Option<f32>,
 }
 
 /// Eq. 7's Λ on the coefficients the combined fit leaves nearly free (the paper's "small"): 0.1, chosen on the
@@ -74,6 +77,7 @@ impl FitParams {
             stop_change: 0.01,
             stride: 1,
             icp,
+            fine_distance_m: None,
         }
     }
 
@@ -283,13 +287,19 @@ pub fn fit_shape_with(
     let mut rounds = 0;
     let mut last = Association::default();
     let u = params.length_unit_m;
-    for _ in 0..params.rounds {
+    let mut icp_params = params.icp;
+    for round in 0..params.rounds {
+        if round == 1
+            && let Some(d) = params.fine_distance_m
+        {
+            icp_params.max_distance_m = icp_params.max_distance_m.min(d);
+        }
         rounds += 1;
         body.shape_torso_subset(&raw(body, &z), points)
             .map_err(FitError::Buffer)?;
         subset_normals(body, points, normals);
         for _ in 0..params.icp_steps {
-            pose = icp::point_to_plane_step(frame, k, points, Some(normals), stride, &pose, &params.icp)
+            pose = icp::point_to_plane_step(frame, k, points, Some(normals), stride, &pose, &icp_params)
                 .map_err(FitError::Icp)?
                 .0;
         }
@@ -315,7 +325,7 @@ pub fn fit_shape_with(
             Some(normals),
             stride,
             &pose,
-            &params.icp,
+            &icp_params,
             |i, _, o, n| {
                 let v = subset.at(i) as usize;
                 let c = model_from_camera * o;

@@ -226,6 +226,8 @@ pub struct EvalConfig {
     pub point_noise_m: f32,
     /// Residual unit of Eq. 7 (metres).
     pub length_unit_m: f32,
+    /// The fits' correspondence distance from their second round on (metres; `None`: the first round's 0.1 m).
+    pub fine_distance_m: Option<f32>,
     /// Starts of the plain fit.
     pub plain_starts: usize,
     /// Test bodies used at most (0 = all).
@@ -373,6 +375,7 @@ pub fn evaluate(
             let mut p =
                 FitParams::combined_with(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso), cfg.free_weight);
             p.length_unit_m = cfg.length_unit_m;
+            p.fine_distance_m = cfg.fine_distance_m;
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
                 fit_shape(
                     &body,
@@ -415,6 +418,7 @@ pub fn evaluate(
             let t2 = Instant::now();
             let mut pp = FitParams::plain(icp);
             pp.length_unit_m = cfg.length_unit_m;
+            pp.fine_distance_m = cfg.fine_distance_m;
             let mut best: Option<supine_core::fit::FitResult> = None;
             for z0 in plain_starts(cfg.plain_starts) {
                 let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else {

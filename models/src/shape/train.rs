@@ -479,6 +479,7 @@ mod tests {
             seed: 1,
             point_noise_m: 0.03,
             length_unit_m: 0.01,
+            fine_distance_m: None,
             plain_starts: 2,
             max_bodies: 1,
             split: "test".into(),
