@@ -257,11 +257,7 @@ pub fn apart_json(apart: &[[Apart; P]; 3]) -> Map<String, Value> {
 
 /// The stdout lines for [`apart_json`].
 pub fn apart_text(apart: &[[Apart; P]; 3]) -> String {
-    let mut s = String::from(
-        "
-[quantised vs refined: views more than 2 cm / 5 cm apart]
-",
-    );
+    let mut s = String::from("\n[quantised vs refined: views more than 2 cm / 5 cm apart]\n");
     s += &format!("{:<12}", "subset");
     for p in SalientPoint::ALL {
         s += &format!(" {:>15}", p.name());

@@ -75,7 +75,8 @@ pub struct EvalShapeArgs {
     #[arg(long, default_value_t = 2.5)]
     pub length_unit_mm: f32,
     /// Coarse to fine: the fits' first round pairs points up to 0.1 m apart (the distance), later rounds
-    /// up to this many millimetres (0: 0.1 m throughout). 50, chosen on the validation bodies (docs/shape-eval.md).
+    /// up to this many millimetres (0: 0.1 m throughout). 50, chosen on the validation bodies (docs/shape-eval.md);
+    /// the tracker's fits keep 0.1 m throughout.
     #[arg(long, default_value_t = 50.0)]
     pub fine_distance_mm: f32,
     /// Starts of the plain model fit (0 skips the plain fit).
