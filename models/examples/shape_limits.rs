@@ -181,7 +181,8 @@ fn main() -> Result<()> {
     };
     let yf: Vec<V20> = fi.iter().map(|&i| c.shapes[i]).collect();
     let ymat = |ys: &[V20]| DMatrix::from_fn(ys.len(), 20, |r, k| ys[r][k]);
-    for (label, imgs) in [("exact points", &c.clean), ("noisy points", &c.noisy)] {
+    // `which`: the index of the points each view was made with in `c.points`.
+    for (label, imgs, which) in [("exact points", &c.clean, 0), ("noisy points", &c.noisy, 1)] {
         let co = project_all(&sub, imgs);
         let co: Vec<V20> = co.into_iter().map(|x| x.unwrap_or([0.0; 20])).collect();
         let xf: Vec<V20> = fi.iter().map(|&i| co[i]).collect();
@@ -217,7 +218,6 @@ fn main() -> Result<()> {
             );
         }
         // The salient points' distances beside the coefficients (`linear::inputs`), as `train shape` fits them.
-        let which = usize::from(label == "noisy points");
         let li = |idx: &[usize]| -> Vec<[f32; LINEAR_INPUTS]> {
             idx.iter()
                 .map(|&i| linear::inputs(&co[i], &c.points[i][which]))

@@ -247,7 +247,6 @@ fn the_height_reference_is_read_and_an_unknown_one_rejected() {
     ));
 }
 
-/// The fixture re-written with a `LINR` section of `values` (bytes: f32 little-endian).
 /// `values` as little-endian f32 bytes into `out` (four bytes each).
 fn le_f32(values: &[f32], out: &mut [u8]) {
     for (b, v) in out.chunks_exact_mut(4).zip(values) {
@@ -255,6 +254,7 @@ fn le_f32(values: &[f32], out: &mut [u8]) {
     }
 }
 
+/// The fixture re-written with the `extra` sections (tag, f32 little-endian bytes) appended.
 fn with_linear(extra: &[(&[u8; 4], &[u8])], out: &mut [u8]) -> usize {
     use crate::model_file::{ElemType, SectionData};
     let (buf, n) = tiny();

@@ -315,6 +315,7 @@ pub fn evaluate(
     let ns = [1usize, 2, 4, 8, 12];
     let mut multi: Vec<Stats> = vec![Stats::default(); ns.len()];
     let mut multi_comb: Vec<Stats> = vec![Stats::default(); ns.len()];
+    let coefficients_only = shape.coefficients_only();
     let mut canonical = vec![0.0f32; shape.pixels()];
     let mut subset = vec![[0.0f32; 3]; body.counts().subset];
     let mut normals = subset.clone();
@@ -447,7 +448,7 @@ pub fn evaluate(
                 Some([0.0; 20]),
                 on_bed.map(|r| r.shape),
                 Some(shape.forest().predict(&est.subspace)),
-                Some(shape.coefficients_only().regress(&est.subspace, &pts)),
+                Some(coefficients_only.regress(&est.subspace, &pts)),
             ];
             let ms = [
                 ms_sub,

@@ -402,10 +402,11 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         (&lv, &yv),
         if holdout { (&lf, &yf) } else { (&la, &ya) },
     )?;
-    let linear: Vec<&[f32]> = [&coeffs, &points]
+    let (use_coeffs, use_points) = (coeffs.score < best.0, points.score < best.0);
+    let linear: Vec<&[f32]> = [(&coeffs, use_coeffs), (&points, use_points)]
         .into_iter()
-        .filter(|r| r.score < best.0)
-        .map(|r| r.weights.as_slice())
+        .filter(|(_, used)| *used)
+        .map(|(r, _)| r.weights.as_slice())
         .collect();
     let report = serde_json::json!({
         "config": cfg,
@@ -421,7 +422,7 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         "ridge_lambda": coeffs.lambda,
         "ridge_points_choices": points.choices,
         "ridge_points_lambda": points.lambda,
-        "regressor": match (points.score < best.0, coeffs.score < best.0) {
+        "regressor": match (use_points, use_coeffs) {
             (true, _) => "linear_points",
             (false, true) => "linear",
             _ => "forest",
