@@ -305,8 +305,8 @@ pub fn estimate_from_leaves<M: ForestModel + ?Sized>(
     out
 }
 
-/// One frame: sample `cfg.samples` kept pixels of `img` (clip `clip`, intrinsics `k`), descend the trees, vote and
-/// mean-shift each point (with `priors[point]` where given). A point without any vote is `None`.
+/// One frame: warm the clip's rows, sample `cfg.samples` kept pixels of `img` (clip `clip`, intrinsics `k`), descend
+/// the trees, vote and mean-shift each point (with `priors[point]` where given). A point without any vote is `None`.
 pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     model: &M,
     img: &D,
@@ -317,6 +317,7 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     ws: &mut Workspace,
 ) -> [Option<PointEstimate>; P] {
     let want = cfg.samples.min(MAX_SAMPLES);
+    img.warm_rows(clip.region.v0, clip.region.v1.min(k.height));
     let n = sample_pixels(img, k, clip, cfg.seed, &mut ws.samples[..want]);
     let trees = model.tree_count().min(MAX_TREES);
     descend_samples(

@@ -106,6 +106,10 @@ impl<D: DepthImage + ?Sized, const N: usize> DepthImage for Ceiling<'_, D, N> {
         }
         if low { d } else { 0 }
     }
+
+    fn warm_rows(&self, v0: u16, v1: u16) {
+        self.img.warm_rows(v0, v1)
+    }
 }
 
 /// Draw up to `out.len()` kept pixels uniformly from the clip's region with a generator seeded by `seed`; returns
