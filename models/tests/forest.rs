@@ -95,6 +95,28 @@ fn training_is_deterministic_across_thread_counts() {
 }
 
 #[test]
+fn the_offset_objective_grows_other_trees_as_deterministically() {
+    let ds = Dataset::open(dataset()).unwrap();
+    let mut cfg = tiny();
+    cfg.tree.offset_objective_share = 0.5;
+    cfg.tree.pure_by_offsets = true;
+    let bytes = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new()
+            .num_threads(threads)
+            .build()
+            .unwrap();
+        let (forest, _) = pool.install(|| train(&ds, &cfg, false)).unwrap();
+        forest.to_file_bytes("{}").unwrap()
+    };
+    let one = bytes(1);
+    assert_eq!(one, bytes(2), "same seed, same forest at 1 and 2 threads");
+    let (classification, _) = trained();
+    assert_ne!(&one, classification, "the offsets chose other splits");
+    let v = ForestView::parse(&one).unwrap();
+    assert!(v.node_count() > 20, "trees grew: {} nodes", v.node_count());
+}
+
+#[test]
 fn sidecar_is_tied_to_its_forest() {
     let (a, side) = trained();
     let v = ForestView::parse(a).unwrap();

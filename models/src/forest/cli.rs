@@ -207,6 +207,14 @@ pub struct TrainJointsArgs {
     /// Most fitting images each tree is grown on (bounds memory for large datasets).
     #[arg(long, default_value_t = 800)]
     pub tree_images: usize,
+    /// Share of the nodes of mixed classes split by the body samples' offset variance toward the six points
+    /// instead of the class entropy, drawn per node as Hough forests do; 0: the classification structure of
+    /// Shotton et al. throughout.
+    #[arg(long, default_value_t = 0.0)]
+    pub offset_objective_share: f32,
+    /// Split a node of one body part further by its samples' offsets instead of making it a leaf.
+    #[arg(long)]
+    pub pure_by_offsets: bool,
     /// Read the training views through the tracker's height ceiling: depth more than this many metres above the
     /// bed planes is no depth, as the tracker's forest reads it (0: the views as rendered).
     #[arg(long, default_value_t = supine_core::tracker::FOREST_CEILING_M)]
@@ -324,6 +332,10 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
         "--samples, --depth and --candidates must be positive"
     );
     ensure!(
+        (0.0..=1.0).contains(&a.offset_objective_share),
+        "--offset-objective-share must be in [0, 1]"
+    );
+    ensure!(
         a.lambda1 > 0.0
             && a.lambda2.iter().all(|&l| l >= 0.0)
             && a.l2 >= 0.0
@@ -350,6 +362,8 @@ pub fn run_train(a: &TrainJointsArgs) -> Result<()> {
             min_split: a.min_split.max(2),
             offset_px_m: a.offset_px_m,
             threshold_mm: a.threshold_mm,
+            offset_objective_share: a.offset_objective_share,
+            pure_by_offsets: a.pure_by_offsets,
         },
         infer_samples: a.infer_samples,
         tree_images: a.tree_images.max(1),

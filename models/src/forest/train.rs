@@ -357,6 +357,7 @@ pub fn train_on(
     kept_ids.sort_unstable();
     let slot: HashMap<usize, u32> = kept_ids.iter().enumerate().map(|(s, &i)| (i, s as u32)).collect();
     let kept_imgs: Vec<TrainImage> = kept_ids.iter().filter_map(|i| kept.remove(i)).collect();
+    let kept_targets: Vec<_> = kept_ids.iter().map(|&i| infos[i].targets).collect();
     let tree_inputs: Vec<Vec<TrainSample>> = subsets
         .iter()
         .filter(|_| structure.is_none())
@@ -384,6 +385,7 @@ pub fn train_on(
             .map(|(t, mut s)| {
                 let tree = grow(
                     &kept_imgs,
+                    &kept_targets,
                     &mut s,
                     &cfg.tree,
                     mix_seed(cfg.seed, 0x7000 + t as u64),
