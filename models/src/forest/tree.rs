@@ -417,7 +417,7 @@ mod tests {
         assert_eq!(offsets.nodes.len(), 3, "the offsets split the pure root");
         assert_eq!(offsets.leaves, 2);
         // The split lowers the offsets' spread: the two sides' squared deviations sum to less than the root's.
-        let targets = [[[0.3f32, 0.0, 1.1]; P]];
+        let (images, targets, _) = scene(0);
         let sse = |s: &[TrainSample]| {
             let mut st: OffsetStats = [(0, [0.0; 3], 0.0); P];
             for o in s.iter().filter_map(|s| offsets_of(s, &targets)) {
@@ -425,19 +425,9 @@ mod tests {
             }
             offset_sse(&st)
         };
-        let (images, _, _) = scene(0);
+        // The split partitions the samples in place, left ones first.
         let test = offsets.nodes[0].test;
-        let nl = samples
-            .iter()
-            .take_while(|q| {
-                test.goes_left(
-                    &images[0],
-                    q.px.x as i32,
-                    q.px.y as i32,
-                    ProbeScale::new(q.px.d_mm),
-                )
-            })
-            .count();
+        let nl = samples.iter().take_while(|q| left(&test, &images, q)).count();
         assert!(nl > 0 && nl < samples.len(), "both sides get samples");
         assert!(
             sse(&samples[..nl]) + sse(&samples[nl..]) < 0.9 * sse(&samples),
