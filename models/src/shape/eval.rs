@@ -247,6 +247,14 @@ pub struct EvalConfig {
     pub free_weight: f32,
 }
 
+impl EvalConfig {
+    /// The fit settings every fitted method of the evaluation shares (Eq. 7's unit, coarse to fine) into `p`.
+    fn tune(&self, p: &mut FitParams) {
+        p.length_unit_m = self.length_unit_m;
+        p.fine_distance_m = self.fine_distance_m;
+    }
+}
+
 /// Starting shapes of the plain fit: the mean, then ±1.5σ on the first two coefficients (`n` of them, none for 0).
 fn plain_starts(n: usize) -> Vec<[f32; 20]> {
     let mut v = vec![[0.0f32; 20]];
@@ -375,8 +383,7 @@ pub fn evaluate(
             let t1 = Instant::now();
             let mut p =
                 FitParams::combined_with(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso), cfg.free_weight);
-            p.length_unit_m = cfg.length_unit_m;
-            p.fine_distance_m = cfg.fine_distance_m;
+            cfg.tune(&mut p);
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
                 fit_shape(
                     &body,
@@ -418,8 +425,7 @@ pub fn evaluate(
             // Plain fitting: several starts from the mean, the best residual wins.
             let t2 = Instant::now();
             let mut pp = FitParams::plain(icp);
-            pp.length_unit_m = cfg.length_unit_m;
-            pp.fine_distance_m = cfg.fine_distance_m;
+            cfg.tune(&mut pp);
             let mut best: Option<supine_core::fit::FitResult> = None;
             for z0 in plain_starts(cfg.plain_starts) {
                 let Ok(pose0) = initial_pose(&body, &z0, &pts, &up) else {

@@ -403,11 +403,13 @@ pub fn train(ds: &Dataset, cfg: &TrainConfig, png: Option<&std::path::Path>) -> 
         if holdout { (&lf, &yf) } else { (&la, &ya) },
     )?;
     let (use_coeffs, use_points) = (coeffs.score < best.0, points.score < best.0);
-    let linear: Vec<&[f32]> = [(&coeffs, use_coeffs), (&points, use_points)]
-        .into_iter()
-        .filter(|(_, used)| *used)
-        .map(|(r, _)| r.weights.as_slice())
-        .collect();
+    let mut linear: Vec<&[f32]> = Vec::new();
+    if use_coeffs {
+        linear.push(&coeffs.weights);
+    }
+    if use_points {
+        linear.push(&points.weights);
+    }
     let report = serde_json::json!({
         "config": cfg,
         "forest": fc,
