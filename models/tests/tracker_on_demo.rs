@@ -159,6 +159,61 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
     }
 }
 
+/// The first frame after the init phase that has a tracked pose, and the init phase's last frame.
+fn first_tracked(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    frames: &[(Vec<u16>, Timestamp)],
+) -> (usize, usize) {
+    let states = run(models, cfg, frames, 40).states;
+    let init = states
+        .iter()
+        .position(|s| *s != TrackerState::Initialising)
+        .expect("init finished");
+    let first = states
+        .iter()
+        .position(|s| {
+            matches!(
+                s,
+                TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
+            )
+        })
+        .expect("acquired");
+    (first, init)
+}
+
+#[test]
+fn the_init_fit_lets_the_first_acquisition_confirm_a_frame_sooner() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    // No fit is sure enough to skip the confirmation over frames (the demo's first fits are), so without the init
+    // fit the first acquisition needs a second frame.
+    let mut on = TrackerConfig {
+        acquire_from_init: true,
+        ..config(&seq)
+    };
+    on.icp.acquire_max_rms_m = 0.0;
+    let off = TrackerConfig {
+        acquire_from_init: false,
+        ..on
+    };
+    let (first_on, init_on) = first_tracked(&models, on, &frames);
+    let (first_off, init_off) = first_tracked(&models, off, &frames);
+    assert_eq!(init_on, init_off, "the init phase does not depend on it");
+    assert_eq!(
+        first_on,
+        init_on + 1,
+        "on: tracked from the first frame after the init phase"
+    );
+    assert_eq!(
+        first_off,
+        first_on + 1,
+        "off: the first acquisition waits for a second frame"
+    );
+}
+
 /// The init phase's shape and the shape after `lock_refits` refits in `rounds` rounds (with `bed`, the refits' bed
 /// contact) on the demo's first `n` frames, as distances (σ units, all 20 coefficients) to the recording's true
 /// shape, and the body-shape revisions sent.

@@ -63,6 +63,10 @@ pub struct TrackingEvalArgs {
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
     pub search_shape_start: bool,
+    /// The tracker's `acquire_from_init` (default: the tracker's, on since 2026-12-04): the init phase's fitted
+    /// torso pose starts the first acquisition and counts as its first consistent frame.
+    #[arg(long, value_name = "true|false")]
+    pub acquire_from_init: Option<bool>,
     /// The tracker's `follow_occluded` (default: the tracker's, on since 2026-12-03's seventh round): while the
     /// torso is mostly hidden, the pose follows fits from the temporal start that pass the acquisition's floors
     /// instead of coasting.
@@ -267,6 +271,9 @@ pub fn run_variant(
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
     cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
     cfg.search_shape_start = args.search_shape_start;
+    if let Some(a) = args.acquire_from_init {
+        cfg.acquire_from_init = a;
+    }
     if let Some(f) = args.follow_occluded {
         cfg.icp.follow_occluded = f;
     }
