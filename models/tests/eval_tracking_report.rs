@@ -93,3 +93,48 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
     assert!(ms(one, "/stage_ms_p50/forest") > 0.0);
     assert!(ms(one, "/stage_ms_p50/icp") > 0.0);
 }
+
+#[test]
+fn the_oracle_start_fit_is_reported_on_every_fifth_tracked_frame_and_stays_near_the_truth() {
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo/occlusion");
+    let out = std::env::temp_dir().join(format!("eval-tracking-oracle-{}.json", std::process::id()));
+    let cli = Cli::parse_from([
+        "eval-tracking".as_ref(),
+        "--data".as_ref(),
+        data.as_os_str(),
+        "--json".as_ref(),
+        out.as_os_str(),
+        "--variants".as_ref(),
+        "forest_icp_feedback".as_ref(),
+        "--budget-ms".as_ref(),
+        "1000".as_ref(),
+        "--oracle-start".as_ref(),
+    ]);
+    assert_eq!(tracking::run(&cli.args), ExitCode::SUCCESS);
+    let report: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
+    let _ = std::fs::remove_file(&out);
+    let frames = report["sequences"][0]["variants"]["forest_icp_feedback"]["per_frame"]
+        .as_array()
+        .unwrap();
+    let mut near = Vec::new();
+    for f in frames {
+        let i = f["frame"].as_u64().unwrap() as usize;
+        let o = &f["oracle_fit"];
+        let expected = i.is_multiple_of(tracking::ORACLE_EVERY) && !f["torso_mm"].is_null();
+        assert_eq!(!o.is_null(), expected, "frame {i}: {o}");
+        if expected {
+            assert!((0.0..=1.0).contains(&ms(o, "/support")), "frame {i}: {o}");
+            assert!(ms(o, "/pairs") > 0.0, "frame {i}: {o}");
+            // Started at the best rigid pose of a well-tracked patient, the fit stays about as close to the truth
+            // as the tracker's own pose.
+            near.push(ms(o, "/torso_mm") - ms(f, "/torso_mm"));
+        }
+    }
+    assert!(near.len() >= 5, "{} oracle fits", near.len());
+    near.sort_by(f64::total_cmp);
+    let median = near[near.len() / 2];
+    assert!(
+        median.abs() < 3.0,
+        "oracle-start fit's torso error minus the tracker's: median {median} mm"
+    );
+}

@@ -24,9 +24,12 @@ use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use supine_core::body_model::SHAPE_COMPONENTS;
 use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
 use supine_core::geometry::{Isometry3, Point3, Vector3};
+use supine_core::torso::TorsoSurface;
 use supine_core::tracker::accuracy::{self, TrackedFrame, TruthFrame};
-use supine_core::tracker::budget::Stage;
+use supine_core::tracker::budget::{Stage, Stopwatch};
+use supine_core::tracker::torso_icp;
 use supine_core::tracker::{ArmSample, FrameReport, Models, ScratchSizes, Tracker, TrackerConfig, Variant};
 use supine_core::wire::TrackerState;
 use supine_drivers::SourceErrorKind;
@@ -59,6 +62,11 @@ pub struct TrackingEvalArgs {
     /// tracking error from shape error.
     #[arg(long)]
     pub true_shape: bool,
+    /// Diagnostic: on every fifth frame with a pose, also fit the torso from the tracked model's best rigid pose
+    /// against the truth and report it per frame (`oracle_fit`), to tell a missed basin from a shape that cannot
+    /// hold the right pose.
+    #[arg(long)]
+    pub oracle_start: bool,
     /// The tracker's `search_shape_start` (off by default): the shape refinement starts from a rigid registration
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
@@ -234,6 +242,33 @@ pub struct FrameScore {
     pub fit_pose_mm: Option<f32>,
     /// Rotation error of the frame's best fit against the true torso frame, degrees.
     pub fit_pose_deg: Option<f32>,
+    /// With `--oracle-start`, on every [`ORACLE_EVERY`]th frame with a pose: the torso fit from the tracked model's
+    /// best rigid pose against the truth.
+    pub oracle_fit: Option<OracleFit>,
+}
+
+/// Frames between two oracle-start fits (`--oracle-start`).
+pub const ORACLE_EVERY: usize = 5;
+
+/// A diagnostic torso fit started at the tracked model's best rigid pose against the true torso
+/// ([`TrackingTruth::rigid_best`]), run as an acquisition's fit (the tracker's ICP settings, the acquisition's
+/// association): whether a better fit than the tracker's lies where the truth is. When its support is clearly
+/// above the tracker's own fit's, the tracker's search missed that basin; when ICP walks away from the truth, the
+/// shape does not let the data hold the right pose.
+#[derive(Debug, Clone, Copy, Default, serde::Serialize)]
+pub struct OracleFit {
+    /// Inlier pairs over pairs plus see-through points (the tracker's `support`).
+    pub support: f32,
+    /// The same for the tracker's own fit of the frame.
+    pub own_support: f32,
+    /// RMS point-to-plane residual, mm.
+    pub rms_mm: f32,
+    /// Pairs of the last association.
+    pub pairs: usize,
+    /// Share of the front-facing torso seen.
+    pub visible: f32,
+    /// Torso surface error at the fit's pose, mm.
+    pub torso_mm: f32,
 }
 
 /// A probe tip at most this far from the skin (true signed distance, mm) is in contact range:
@@ -404,6 +439,9 @@ pub fn run_variant(
                 .collect();
             s.torso_mm = Some(tt.torso_surface_error_mm(&estimated, i as u32)?);
             s.torso_floor_mm = tt.rigid_floor_mm(surface.vertices(), i as u32)?;
+            if args.oracle_start && i.is_multiple_of(ORACLE_EVERY) {
+                s.oracle_fit = oracle_fit(&tracker, &frame, &k, tt, &surface, &r, i as u32)?;
+            }
             if let Some(p) = r.salient_camera {
                 s.point_mm = Some(tt.point_error_mm(&p.map(|q| q.coords.into()), i as u32)?.mean_mm);
             }
@@ -498,6 +536,49 @@ pub fn run_variant(
 
 /// Frames from the end of the full-occlusion episode (the first unparked frame) to the first frame tracked again
 /// (a state with a pose and a torso surface error under 20 mm); the frames left when it never recovers.
+/// The [`OracleFit`] of frame `f`, when the tracker has a bed and the truth a torso of the model's size.
+fn oracle_fit(
+    tracker: &Tracker<'_, '_>,
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    tt: &TrackingTruth,
+    surface: &TorsoSurface<'_>,
+    r: &FrameReport,
+    f: u32,
+) -> Result<Option<OracleFit>> {
+    let (Some(best), Some(bed)) = (tt.rigid_best(surface.vertices(), f)?, tracker.bed()) else {
+        return Ok(None);
+    };
+    let cfg = tracker.config();
+    let clock = MonotonicClock;
+    let (pose, fit) = torso_icp::fit_torso(
+        frame,
+        k,
+        surface.vertices(),
+        surface.normals(),
+        best,
+        &cfg.icp,
+        &torso_icp::icp_params(&cfg.icp, bed),
+        &cfg.budget,
+        cfg.icp.acquire_min_iterations,
+        &clock,
+        &Stopwatch::start(&clock),
+    );
+    let posed: Vec<[f32; 3]> = surface
+        .vertices()
+        .iter()
+        .map(|v| (pose * v).coords.into())
+        .collect();
+    Ok(Some(OracleFit {
+        support: fit.support(),
+        own_support: r.fit.support(),
+        rms_mm: fit.association.rms_m() * 1000.0,
+        pairs: fit.association.pairs,
+        visible: fit.visible,
+        torso_mm: tt.torso_surface_error_mm(&posed, f)?,
+    }))
+}
+
 fn recovery_frames(end: u32, scores: &[FrameScore]) -> u32 {
     scores
         .iter()

@@ -271,11 +271,9 @@ impl TrackingTruth {
         Ok((sum / estimated_camera.len() as f64 * 1000.0) as f32)
     }
 
-    /// The torso surface error (mm) of `model` (torso vertices in any frame, the truth's vertices in its order) at
-    /// the rigid pose that best fits it to frame `f`'s true posed torso, vertex for vertex (Kabsch): the error left
-    /// by the model's shape and by the posture of the true body (the spine's bend and twist, the neck), which no
-    /// rigid pose removes. A tracker's torso error above it is its pose's. `None` when the counts differ.
-    pub fn rigid_floor_mm(&self, model: &[Point3<f32>], f: u32) -> Result<Option<f32>> {
+    /// The rigid pose that best fits `model` (torso vertices in any frame, the truth's vertices in its order) to
+    /// frame `f`'s true posed torso, vertex for vertex (Kabsch); `None` when the counts differ.
+    pub fn rigid_best(&self, model: &[Point3<f32>], f: u32) -> Result<Option<Isometry3<f32>>> {
         let posed = self.torso.frame(f as usize).context("torso frame missing")?;
         if posed.len() != model.len() {
             return Ok(None);
@@ -288,7 +286,14 @@ impl TrackingTruth {
                 camera: *m,
             })
             .collect();
-        let Some(best) = kabsch(&pairs, |_| 1.0) else {
+        Ok(kabsch(&pairs, |_| 1.0))
+    }
+
+    /// The torso surface error (mm) of `model` at its best rigid pose ([`TrackingTruth::rigid_best`]): the error left
+    /// by the model's shape and by the posture of the true body (the spine's bend and twist, the neck), which no
+    /// rigid pose removes. A tracker's torso error above it is its pose's. `None` when the counts differ.
+    pub fn rigid_floor_mm(&self, model: &[Point3<f32>], f: u32) -> Result<Option<f32>> {
+        let Some(best) = self.rigid_best(model, f)? else {
             return Ok(None);
         };
         let aligned: Vec<[f32; 3]> = model.iter().map(|v| (best * v).coords.into()).collect();
