@@ -185,6 +185,12 @@ pub struct TrackerConfig {
     /// 12.9 / 13.2 mm (medians 8.1 / 6.8 / 6.6 / 5.9 / 5.8) and a probe error of 12.7 / 11.2 / 11.2 / 11.3 / 11.4 mm;
     /// at 0.01, 30 sequences gained more than 0.5 mm and 3 lost (docs/tracking.md, "Lock refits with a weaker pull").
     pub refit_lambda: f32,
+    /// The lock refits use every `refit_stride`-th vertex of the body model's subset (1: all). 2 since
+    /// 2026-12-04: a refit then takes 1.8 ms instead of 2.8 (medians), so the frames that run one stay under 4 ms,
+    /// and on the 146 validation sequences the frame p99 fell 4.94 -> 3.96 ms (all frames after the init phase)
+    /// with the torso error 10.49 -> 10.41 mm and the probe error 10.71 -> 10.72 mm; 3 gave 3.91 ms, 10.55 mm and
+    /// 10.78 mm (docs/tracking.md, "Lock refits on every second vertex").
+    pub refit_stride: u16,
     /// [`TorsoIcpConfig::hold_rotation_weight`] of the fit from the temporal start while occluded (0: off): the
     /// last pose's rotation is held where the little the frame shows of the torso does not fix it, so that a
     /// followed pose ([`TorsoIcpConfig::follow_occluded`]) does not turn away a few degrees a frame. 0.3: on the 46
@@ -250,6 +256,7 @@ impl Default for TrackerConfig {
             refit_late_min_visible: 0.4,
             refit_bed_contact: None,
             refit_lambda: 0.01,
+            refit_stride: 2,
             occluded_hold_rotation: 0.3,
             surface: SurfaceConfig::default(),
             planes: PlaneConfig::default(),
@@ -988,6 +995,7 @@ impl<'m, 's> Tracker<'m, 's> {
         // left torso errors 1.4x as large (docs/tracking.md, "Shape refit on lock").
         let params = FitParams {
             lambda: self.cfg.refit_lambda,
+            stride: self.cfg.refit_stride,
             ..FitParams::plain(torso_icp::temporal_params(&self.cfg.icp, &t.bed))
         };
         let start = camera_from_torso * t.body_from_torso.inverse();

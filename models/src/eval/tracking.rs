@@ -96,6 +96,10 @@ pub struct TrackingEvalArgs {
     /// 0.01; 0.1 before 2026-12-03's sixth round).
     #[arg(long, value_parser = parse_weight)]
     pub refit_lambda: Option<f32>,
+    /// The tracker's `refit_stride`: the lock refits use every N-th vertex of the body model's subset (default: the
+    /// tracker's).
+    #[arg(long)]
+    pub refit_stride: Option<u16>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
     /// in fits from every start but the temporal one.
     #[arg(long, value_parser = parse_weight)]
@@ -327,6 +331,9 @@ pub fn run_variant(
     }
     if let Some(l) = args.refit_lambda {
         cfg.refit_lambda = l;
+    }
+    if let Some(n) = args.refit_stride {
+        cfg.refit_stride = n;
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
