@@ -4,6 +4,7 @@
 
 use clap::Parser;
 use serde_json::Value;
+use std::ffi::OsString;
 use std::path::Path;
 use std::process::ExitCode;
 use supine_core::tracker::budget::Stage;
@@ -21,24 +22,31 @@ fn ms(v: &Value, path: &str) -> f64 {
         .unwrap_or_else(|| panic!("{path} missing or not a number"))
 }
 
-#[test]
-fn the_report_has_the_contracts_keys_and_each_stages_latency() {
+/// The report of `eval tracking` (the feedback variant, an idle machine's budget, and `extra`) on the committed demo
+/// sequence with full occlusion; `tag` names its temporary file.
+fn demo_report(tag: &str, extra: &[&str]) -> Value {
     let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo/occlusion");
-    let out = std::env::temp_dir().join(format!("eval-tracking-report-{}.json", std::process::id()));
-    let cli = Cli::parse_from([
-        "eval-tracking".as_ref(),
-        "--data".as_ref(),
-        data.as_os_str(),
-        "--json".as_ref(),
-        out.as_os_str(),
-        "--variants".as_ref(),
-        "forest_icp_feedback".as_ref(),
-        "--budget-ms".as_ref(),
-        "1000".as_ref(),
-    ]);
+    let out = std::env::temp_dir().join(format!("eval-tracking-{tag}-{}.json", std::process::id()));
+    let mut args: Vec<OsString> = ["eval-tracking", "--data"].map(OsString::from).to_vec();
+    args.push(data.into());
+    args.push("--json".into());
+    args.push(out.clone().into());
+    args.extend(
+        ["--variants", "forest_icp_feedback", "--budget-ms", "1000"]
+            .iter()
+            .chain(extra)
+            .map(OsString::from),
+    );
+    let cli = Cli::parse_from(args);
     assert_eq!(tracking::run(&cli.args), ExitCode::SUCCESS);
     let report: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
     let _ = std::fs::remove_file(&out);
+    report
+}
+
+#[test]
+fn the_report_has_the_contracts_keys_and_each_stages_latency() {
+    let report = demo_report("report", &[]);
     assert!(report["commit"].is_string());
     let summary = &report["forest_icp_feedback"];
     for key in [
@@ -96,23 +104,7 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
 
 #[test]
 fn the_oracle_start_fit_is_reported_on_every_fifth_tracked_frame_and_stays_near_the_truth() {
-    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("artifacts/demo/occlusion");
-    let out = std::env::temp_dir().join(format!("eval-tracking-oracle-{}.json", std::process::id()));
-    let cli = Cli::parse_from([
-        "eval-tracking".as_ref(),
-        "--data".as_ref(),
-        data.as_os_str(),
-        "--json".as_ref(),
-        out.as_os_str(),
-        "--variants".as_ref(),
-        "forest_icp_feedback".as_ref(),
-        "--budget-ms".as_ref(),
-        "1000".as_ref(),
-        "--oracle-start".as_ref(),
-    ]);
-    assert_eq!(tracking::run(&cli.args), ExitCode::SUCCESS);
-    let report: Value = serde_json::from_slice(&std::fs::read(&out).unwrap()).unwrap();
-    let _ = std::fs::remove_file(&out);
+    let report = demo_report("oracle", &["--oracle-start"]);
     let frames = report["sequences"][0]["variants"]["forest_icp_feedback"]["per_frame"]
         .as_array()
         .unwrap();

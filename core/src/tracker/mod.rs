@@ -138,7 +138,7 @@ pub struct TrackerConfig {
     /// pose) and as the first of [`TorsoIcpConfig::acquire_confirm`]'s consistent frames, so a first fit that agrees
     /// with it is trusted a frame sooner. On by default since 2026-12-04: on the 146 validation sequences the tracked
     /// share rose 0.9745 -> 0.9801 (early misses 399 -> 331 on 29001-29100) with the torso error 10.43 -> 10.49 mm
-    /// and the probe error unchanged (docs/tracking.md, "The init fit starts the acquisition").
+    /// and the probe error unchanged (docs/tracking.md, fifteenth round).
     pub acquire_from_init: bool,
     /// Shape refits (Eq. 7, plain: no prior but λ's) on the first frames tracked after the init phase that see enough
     /// of the torso ([`TrackerConfig::refit_min_visible`]), averaged and then built into the torso model (0: off).

@@ -541,8 +541,6 @@ pub fn run_variant(
     Ok((scores, summary))
 }
 
-/// Frames from the end of the full-occlusion episode (the first unparked frame) to the first frame tracked again
-/// (a state with a pose and a torso surface error under 20 mm); the frames left when it never recovers.
 /// The [`OracleFit`] of frame `f`, when the tracker has a bed and the truth a torso of the model's size.
 fn oracle_fit(
     tracker: &Tracker<'_, '_>,
@@ -586,6 +584,8 @@ fn oracle_fit(
     }))
 }
 
+/// Frames from the end of the full-occlusion episode (the first unparked frame) to the first frame tracked again
+/// (a state with a pose and a torso surface error under 20 mm); the frames left when it never recovers.
 fn recovery_frames(end: u32, scores: &[FrameScore]) -> u32 {
     scores
         .iter()
