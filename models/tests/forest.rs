@@ -64,13 +64,14 @@ fn tiny() -> TrainConfig {
     }
 }
 
-fn train_bytes(threads: usize) -> (Vec<u8>, Vec<u8>) {
+/// The forest `cfg` trains at `threads` threads, as file bytes and float sidecar bytes.
+fn train_bytes(cfg: &TrainConfig, threads: usize) -> (Vec<u8>, Vec<u8>) {
     let ds = Dataset::open(dataset()).unwrap();
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(threads)
         .build()
         .unwrap();
-    let (forest, summary) = pool.install(|| train(&ds, &tiny(), false)).unwrap();
+    let (forest, summary) = pool.install(|| train(&ds, cfg, false)).unwrap();
     assert!(summary.validation_images > 0 && summary.fit_images > 0);
     let bytes = forest.to_file_bytes("{}").unwrap();
     let crc = ForestView::parse(&bytes).unwrap().file().crc();
@@ -80,13 +81,13 @@ fn train_bytes(threads: usize) -> (Vec<u8>, Vec<u8>) {
 
 fn trained() -> &'static (Vec<u8>, Vec<u8>) {
     static F: OnceLock<(Vec<u8>, Vec<u8>)> = OnceLock::new();
-    F.get_or_init(|| train_bytes(1))
+    F.get_or_init(|| train_bytes(&tiny(), 1))
 }
 
 #[test]
 fn training_is_deterministic_across_thread_counts() {
     let (a, sa) = trained();
-    let (b, sb) = train_bytes(2);
+    let (b, sb) = train_bytes(&tiny(), 2);
     assert_eq!(a, &b, "same seed, same forest bytes at 1 and 2 threads");
     assert_eq!(sa, &sb, "same float leaves");
     let v = ForestView::parse(a).unwrap();
@@ -96,20 +97,15 @@ fn training_is_deterministic_across_thread_counts() {
 
 #[test]
 fn the_offset_objective_grows_other_trees_as_deterministically() {
-    let ds = Dataset::open(dataset()).unwrap();
     let mut cfg = tiny();
     cfg.tree.offset_objective_share = 0.5;
     cfg.tree.pure_by_offsets = true;
-    let bytes = |threads: usize| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        let (forest, _) = pool.install(|| train(&ds, &cfg, false)).unwrap();
-        forest.to_file_bytes("{}").unwrap()
-    };
-    let one = bytes(1);
-    assert_eq!(one, bytes(2), "same seed, same forest at 1 and 2 threads");
+    let (one, _) = train_bytes(&cfg, 1);
+    assert_eq!(
+        one,
+        train_bytes(&cfg, 2).0,
+        "same seed, same forest at 1 and 2 threads"
+    );
     let (classification, _) = trained();
     assert_ne!(&one, classification, "the offsets chose other splits");
     let v = ForestView::parse(&one).unwrap();

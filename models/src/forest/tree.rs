@@ -94,6 +94,18 @@ const OFFSET_OBJECTIVE_RADIUS_M: f32 = 0.5;
 /// Per point: count, sum of offsets, sum of squared norms (metres).
 type OffsetStats = [(u32, [f64; 3], f64); P];
 
+/// No offsets counted.
+const NO_OFFSETS: OffsetStats = [(0, [0.0; 3], 0.0); P];
+
+/// The statistics of `offsets`.
+fn offset_stats<'a>(offsets: impl IntoIterator<Item = &'a SampleOffsets>) -> OffsetStats {
+    let mut st = NO_OFFSETS;
+    for o in offsets {
+        add_offsets(&mut st, o);
+    }
+    st
+}
+
 /// Sum over points of the squared deviations from the points' mean offsets.
 fn offset_sse(st: &OffsetStats) -> f64 {
     st.iter()
@@ -185,10 +197,7 @@ pub fn grow(
         } else {
             Vec::new()
         };
-        let mut parent: OffsetStats = [(0, [0.0; 3], 0.0); P];
-        for o in offsets.iter().flatten() {
-            add_offsets(&mut parent, o);
-        }
+        let parent = offset_stats(offsets.iter().flatten());
         let counted: u32 = parent.iter().map(|p| p.0).sum();
         let splittable = if by_offsets { counted >= 2 } else { !pure };
         let mut best: Option<(SplitTest, f64)> = None;
@@ -220,7 +229,7 @@ pub fn grow(
             };
             // Offset variance reduction per counted offset (m^2).
             let offset_gain = |t: &SplitTest| {
-                let mut l: OffsetStats = [(0, [0.0; 3], 0.0); P];
+                let mut l = NO_OFFSETS;
                 let mut nl = 0usize;
                 for (s, o) in ss.iter().zip(&offsets) {
                     if left(t, images, s) {
@@ -419,11 +428,8 @@ mod tests {
         // The split lowers the offsets' spread: the two sides' squared deviations sum to less than the root's.
         let (images, targets, _) = scene(0);
         let sse = |s: &[TrainSample]| {
-            let mut st: OffsetStats = [(0, [0.0; 3], 0.0); P];
-            for o in s.iter().filter_map(|s| offsets_of(s, &targets)) {
-                add_offsets(&mut st, &o);
-            }
-            offset_sse(&st)
+            let offsets: Vec<SampleOffsets> = s.iter().filter_map(|s| offsets_of(s, &targets)).collect();
+            offset_sse(&offset_stats(&offsets))
         };
         // The split partitions the samples in place, left ones first.
         let test = offsets.nodes[0].test;
