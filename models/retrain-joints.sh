@@ -4,8 +4,9 @@
 # 1. renders the default dataset (150 bodies x 20 views, seed 1, whole frames; skipped when DATA_DIR already holds it,
 #    refused when DATA_DIR holds another dataset),
 # 2. trains (seed 0; 4 trees, 2048 training samples per image, 512 per frame at inference, at least 150 samples to
-#    split, every fitting image in each tree, views read through the tracker's 0.6 m height ceiling: chosen on
-#    validation bodies, docs/joint-forest.md) into models/artifacts/joints.jfor (+ joints.jfor.float, the float
+#    split, every fitting image in each tree, views read through the tracker's 0.6 m height ceiling, the refinement's
+#    lambda2 1e-4 for the belly and the right hip and 1e-2 for the other points: chosen on validation bodies,
+#    docs/joint-forest.md) into models/artifacts/joints.jfor (+ joints.jfor.float, the float
 #    leaves for the report),
 # 3. evaluates on the held-out 30 % of bodies into docs/joint-forest-eval.json and docs/joint-forest-fig6.png.
 # Bigger runs are a flag away: BODIES=4000 VIEWS=12 models/retrain-joints.sh /big/disk/hvp
@@ -16,7 +17,7 @@ DATA=${1:-target/joints-data}
 BODIES=${BODIES:-150}
 VIEWS=${VIEWS:-20}
 DATASET_ARGS=${DATASET_ARGS:---crop-margin 640}
-TRAIN_ARGS=${TRAIN_ARGS:---trees 4 --samples 2048 --infer-samples 512 --min-split 150 --tree-images 1800}
+TRAIN_ARGS=${TRAIN_ARGS:---trees 4 --samples 2048 --infer-samples 512 --min-split 150 --tree-images 1800 --lambda2 1e-2,1e-2,1e-2,1e-4,1e-2,1e-4}
 cargo build --release -p supine-models --bin supine-models
 BIN=target/release/supine-models
 if [[ ! -f "$DATA/dataset.json" ]]; then
