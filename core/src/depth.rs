@@ -12,6 +12,7 @@ pub const PIXELS: usize = WIDTH * HEIGHT;
 /// The depth value that marks a pixel without a measurement.
 pub const NO_DEPTH: u16 = 0;
 
+use crate::normal_memo::NormalMemo;
 use crate::time::Timestamp;
 
 /// A depth image lent by a source, with its capture time and index.
@@ -24,6 +25,8 @@ pub struct DepthFrame<'a> {
     pub capture: Timestamp,
     /// Frame index as counted by the source (starts at whatever the source reports; gaps mean dropped frames).
     pub index: u32,
+    /// The memo of this frame's observed normals, when the caller lent one ([`DepthFrame::with_normal_memo`]).
+    normals: Option<NormalMemo<'a>>,
 }
 
 /// Why a buffer cannot be viewed as a depth frame.
@@ -77,7 +80,26 @@ impl<'a> DepthFrame<'a> {
             height,
             capture,
             index,
+            normals: None,
         })
+    }
+
+    /// This frame with `memo` for its observed normals: ICP's association then computes each pixel's normal once
+    /// however many fits read it ([`crate::normal_memo`]). `memo` must be fresh for this frame
+    /// ([`crate::normal_memo::MemoStamp::next`]) and serve its size; one that does not is ignored.
+    pub fn with_normal_memo<'b>(&self, memo: NormalMemo<'b>) -> DepthFrame<'b>
+    where
+        'a: 'b,
+    {
+        DepthFrame {
+            normals: memo.fits(self.width, self.height).then_some(memo),
+            ..*self
+        }
+    }
+
+    /// The memo of this frame's observed normals, if one was lent.
+    pub fn normal_memo(&self) -> Option<&NormalMemo<'a>> {
+        self.normals.as_ref()
     }
 
     /// The pixels, row-major, millimetres, 0 = no depth.

@@ -9,12 +9,17 @@
 //! away.
 //!
 //! Cost: per model point one projection, three unprojections and a 6x6 outer product (~80 flops): 1.2 k torso
-//! points take about 20 µs per step on one desktop core; nothing allocates.
+//! points take about 20 µs per step on one desktop core; nothing allocates. A frame that carries a normal memo
+//! ([`crate::normal_memo`], the tracker's frames) computes each pixel's normal once however many fits and steps read
+//! it, with the same result.
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::geometry::{Isometry3, Plane, Point3, Translation3, UnitQuaternion, Vector3};
 use crate::spd::solve_spd;
+
+/// Pixel distance of the depth neighbours that give an observed normal ([`IcpParams::new`]'s).
+pub const NORMAL_STEP_PX: u16 = 2;
 
 /// Association and rejection parameters.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -46,7 +51,7 @@ impl IcpParams {
             mattress,
             head_section: None,
             above_mattress_m: 0.015,
-            normal_step_px: 2,
+            normal_step_px: NORMAL_STEP_PX,
             behind_margin_m: f32::INFINITY,
         }
     }
@@ -205,7 +210,27 @@ fn partner_of(
     {
         return Ok(None);
     }
-    let s = params.normal_step_px.max(1) as i32;
+    let s = params.normal_step_px.max(1);
+    let n = match frame.normal_memo() {
+        Some(memo) if memo.step_px() == s => {
+            memo.get_or(u, v, || observed_normal(frame, k, &o, u, v, s).map(Into::into))
+        }
+        _ => observed_normal(frame, k, &o, u, v, s).map(Into::into),
+    };
+    Ok(n.map(|n| (o, Vector3::from(n))))
+}
+
+/// The unit normal toward the camera of the surface observed at pixel (`u`, `v`) (point `o`), from its depth
+/// neighbours `step` pixels away; `None` where a neighbour is missing or lies across a depth edge.
+fn observed_normal(
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    o: &Point3,
+    u: i32,
+    v: i32,
+    step: u16,
+) -> Option<Vector3> {
+    let s = step as i32;
     let near = |q: Option<Point3>| q.filter(|q| (q.z - o.z).abs() < 0.05);
     let (Some(l), Some(r), Some(t), Some(b)) = (
         near(observed(frame, k, u - s, v)),
@@ -213,18 +238,18 @@ fn partner_of(
         near(observed(frame, k, u, v - s)),
         near(observed(frame, k, u, v + s)),
     ) else {
-        return Ok(None);
+        return None;
     };
     let n = (r - l).cross(&(b - t));
     let nn = n.norm();
     if nn.is_nan() || nn <= 0.0 {
-        return Ok(None);
+        return None;
     }
     let mut n = n / nn;
     if n.dot(&o.coords) > 0.0 {
         n = -n;
     }
-    Ok(Some((o, n)))
+    Some(n)
 }
 
 /// Associate every model point (`points`, model frame, every `stride`-th) moved by `camera_from_model`, calling
@@ -436,5 +461,78 @@ mod tests {
             "{t:?}"
         );
         assert!(held.rotation.angle() < 1e-4);
+    }
+
+    #[test]
+    fn a_normal_memo_gives_the_same_pairs_as_computing_every_normal() {
+        // A bumpy surface with a hole and a depth edge, and model points near it: the pairs found without a memo,
+        // with a fresh memo (every normal computed) and with the same memo again (every normal read back) agree
+        // to the bit, and a memo of another normal step is bypassed.
+        let k = Intrinsics {
+            fx: 60.0,
+            fy: 60.0,
+            cx: 31.5,
+            cy: 23.5,
+            width: 64,
+            height: 48,
+        };
+        let mut depth = [0u16; 64 * 48];
+        for (i, d) in depth.iter_mut().enumerate() {
+            let (u, v) = ((i % 64) as f32, (i / 64) as f32);
+            *d = (1000.0 + 40.0 * libm::sinf(0.3 * u) + 25.0 * libm::cosf(0.2 * v)) as u16;
+            if (20..26).contains(&(i % 64)) && (10..14).contains(&(i / 64)) {
+                *d = 0;
+            }
+            if i % 64 >= 50 {
+                *d += 300;
+            }
+        }
+        let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
+        let mut points = [Point3::origin(); 300];
+        for (i, p) in points.iter_mut().enumerate() {
+            *p = Point3::new(
+                -0.45 + 0.03 * (i % 30) as f32,
+                -0.3 + 0.06 * (i / 30) as f32,
+                1.01,
+            );
+        }
+        let below = Plane::through(Vector3::new(0.0, 0.0, 3.0), Vector3::new(0.0, 0.0, -1.0));
+        let params = IcpParams::new(below);
+        let pose = Isometry3::from_parts(
+            Translation3::new(0.01, -0.02, 0.0),
+            UnitQuaternion::from_euler_angles(0.05, -0.03, 0.02),
+        );
+        let pairs = |f: &DepthFrame<'_>| {
+            let mut seen = [None; 300];
+            let a = associate(
+                f,
+                &k,
+                &points,
+                None::<&[Vector3]>,
+                1,
+                &pose,
+                &params,
+                |i, p, o, n| {
+                    seen[i] = Some((*p, *o, *n));
+                },
+            );
+            (a, seen)
+        };
+        let plain = pairs(&frame);
+        assert!(plain.0.pairs > 100 && plain.0.no_depth > 0, "{:?}", plain.0);
+        let mut cells = [crate::normal_memo::MemoCell::EMPTY; 64 * 48];
+        let cells = core::cell::Cell::from_mut(&mut cells[..]).as_slice_of_cells();
+        let mut stamps = crate::normal_memo::MemoStamp::default();
+        let memo = frame.with_normal_memo(stamps.next(cells, 64, NORMAL_STEP_PX));
+        assert!(memo.normal_memo().is_some());
+        assert_eq!(pairs(&memo), plain, "the memo's first pass");
+        assert_eq!(pairs(&memo), plain, "the memo read back");
+        let other = frame.with_normal_memo(stamps.next(cells, 64, NORMAL_STEP_PX + 1));
+        assert_eq!(pairs(&other), plain, "a memo of another step is bypassed");
+        let wrong = frame.with_normal_memo(stamps.next(&cells[..64 * 47], 64, NORMAL_STEP_PX));
+        assert!(
+            wrong.normal_memo().is_none(),
+            "a memo of another frame size is not lent"
+        );
     }
 }

@@ -51,6 +51,7 @@ pub mod forest;
 pub mod geometry;
 pub mod icp;
 pub mod model_file;
+pub mod normal_memo;
 pub mod planes;
 pub mod probe;
 pub mod rng;

@@ -9,6 +9,7 @@ use supine_core::forest::infer::Workspace;
 use supine_core::forest::model::ForestView;
 use supine_core::geometry::{Isometry3, Point3, Vector3};
 use supine_core::model_file::ModelFileError;
+use supine_core::normal_memo::MemoCell;
 use supine_core::shape::ShapeModelView;
 use supine_core::torso::{TorsoBuffers, TorsoSurface};
 use supine_core::tracker::surface::VertexSums;
@@ -97,6 +98,7 @@ pub struct TrackerScratch {
     torso_normals: Vec<Vector3>,
     torso_regions: Vec<BodyRegion>,
     forest: Box<Workspace>,
+    normal_memo: Vec<MemoCell>,
 }
 
 impl TrackerScratch {
@@ -113,6 +115,7 @@ impl TrackerScratch {
             torso_normals: vec![Vector3::zeros(); sizes.torso],
             torso_regions: vec![BodyRegion::OffBody; sizes.torso],
             forest: Box::new(Workspace::new()),
+            normal_memo: vec![MemoCell::EMPTY; sizes.pixels],
         }
     }
 
@@ -129,6 +132,7 @@ impl TrackerScratch {
             torso_normals: &mut self.torso_normals,
             torso_regions: &mut self.torso_regions,
             forest: &mut self.forest,
+            normal_memo: &mut self.normal_memo,
         }
     }
 }

@@ -43,6 +43,8 @@ pub mod state;
 pub mod surface;
 pub mod torso_icp;
 
+use core::cell::Cell;
+
 use crate::body_model::{BodyModelView, SHAPE_COMPONENTS};
 pub use crate::calib::ArmSample;
 use crate::calib::solve::{Pair, kabsch};
@@ -55,6 +57,8 @@ use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
 use crate::forest::sample::{Ceiling, Clip, PixelRect};
 use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
+use crate::icp;
+use crate::normal_memo::{MemoCell, MemoStamp};
 use crate::planes::{self, BedScene, PlaneConfig};
 use crate::probe::{self, ProbeMapping};
 use crate::rng::mix_seed;
@@ -293,6 +297,8 @@ pub struct ScratchSizes {
     pub canonical: usize,
     /// `fit_points`, `fit_normals`, `surface_sums` and the three torso buffers (the body model's torso subset).
     pub torso: usize,
+    /// `normal_memo` (the frame's pixels).
+    pub pixels: usize,
 }
 
 impl ScratchSizes {
@@ -306,6 +312,7 @@ impl ScratchSizes {
             ),
             canonical: models.shape.pixels(),
             torso: models.body.counts().subset,
+            pixels: k.width as usize * k.height as usize,
         }
     }
 }
@@ -332,6 +339,8 @@ pub struct Scratch<'s> {
     pub torso_regions: &'s mut [BodyRegion],
     /// The forest's working memory.
     pub forest: &'s mut Workspace,
+    /// The memo of each frame's observed normals, one cell per pixel ([`crate::normal_memo`]).
+    pub normal_memo: &'s mut [MemoCell],
 }
 
 /// Why a tracker could not be built.
@@ -469,6 +478,8 @@ pub struct Tracker<'m, 's> {
     last_shape_frame: Option<u32>,
     last_capture: Option<Timestamp>,
     interval_us: f32,
+    memo_cells: &'s [Cell<MemoCell>],
+    memo_stamp: MemoStamp,
 }
 
 fn check(buffer: &'static str, expected: usize, found: usize) -> Result<(), TrackerError> {
@@ -578,7 +589,7 @@ impl<'m, 's> Tracker<'m, 's> {
         models: Models<'m>,
         k: Intrinsics,
         cfg: TrackerConfig,
-        scratch: Scratch<'s>,
+        mut scratch: Scratch<'s>,
     ) -> Result<Self, TrackerError> {
         let sizes = ScratchSizes::of(&models, &k, &cfg.planes);
         check("plane_points", sizes.plane_points, scratch.plane_points.len())?;
@@ -590,6 +601,8 @@ impl<'m, 's> Tracker<'m, 's> {
         check("torso_vertices", sizes.torso, scratch.torso_vertices.len())?;
         check("torso_normals", sizes.torso, scratch.torso_normals.len())?;
         check("torso_regions", sizes.torso, scratch.torso_regions.len())?;
+        check("normal_memo", sizes.pixels, scratch.normal_memo.len())?;
+        let memo_cells = Cell::from_mut(core::mem::take(&mut scratch.normal_memo)).as_slice_of_cells();
         // The init phase's shape regression, chosen once (`TrackerConfig::shape_point_features`).
         let models = Models {
             shape: if cfg.shape_point_features {
@@ -618,6 +631,8 @@ impl<'m, 's> Tracker<'m, 's> {
             last_shape_frame: None,
             last_capture: None,
             interval_us: 0.0,
+            memo_cells,
+            memo_stamp: MemoStamp::default(),
         })
     }
 
@@ -817,6 +832,11 @@ impl<'m, 's> Tracker<'m, 's> {
             }
         }
         self.last_capture = Some(frame.capture);
+        // Every ICP fit of this frame reads its normals through one memo (the results are the same bits).
+        let memo = self
+            .memo_stamp
+            .next(self.memo_cells, self.k.width, icp::NORMAL_STEP_PX);
+        let frame = &frame.with_normal_memo(memo);
         self.machine.frame_arrived();
         if self.machine.initialised() {
             self.track(frame, arm, clock, &mut watch, &mut report);
@@ -1445,7 +1465,7 @@ impl<'m, 's> Tracker<'m, 's> {
         frame: &DepthFrame<'_>,
         forest: &Isometry3,
         bed: &BedScene,
-        params: &crate::icp::IcpParams,
+        params: &icp::IcpParams,
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) -> heapless::Vec<Isometry3, { bed_search::KEEP + 1 }> {
@@ -1484,7 +1504,7 @@ impl<'m, 's> Tracker<'m, 's> {
         frame: &DepthFrame<'_>,
         bed: &BedScene,
         start: Isometry3,
-        params: &crate::icp::IcpParams,
+        params: &icp::IcpParams,
         budget: &BudgetConfig,
         min_iterations: u8,
         clock: &(impl Clock + ?Sized),
