@@ -215,12 +215,6 @@ pub struct TrackerConfig {
     pub surface: SurfaceConfig,
     /// Bed-plane search.
     pub planes: PlaneConfig,
-    /// While the bed found has no raised head section, the init phase searches it again on up to this many of
-    /// its next frames; a bed with a section replaces it, and the shape estimate starts over (0: the first frame's
-    /// bed stays). 10: on 31001-31100 the first frame's search missed two steep sections (32° and 43°) that later
-    /// frames found, and the torso locked 24-29 cm off; on the 246 sequences searched, no flat bed ever showed a
-    /// section in its first 10 frames (docs/tracking.md, sixteenth round).
-    pub section_looks: u16,
     /// Up in the camera frame when known (from the calibration), for the bed search.
     pub up_camera: Option<Vector3>,
     /// Forest samples per frame (0: the model's own).
@@ -270,7 +264,6 @@ impl Default for TrackerConfig {
             occluded_hold_rotation: 0.3,
             surface: SurfaceConfig::default(),
             planes: PlaneConfig::default(),
-            section_looks: 10,
             up_camera: None,
             forest_samples: 0,
             forest_ceiling_m: FOREST_CEILING_M,
@@ -415,8 +408,6 @@ pub struct FrameReport {
 #[derive(Debug, Clone, Copy)]
 struct Init {
     bed: Option<BedScene>,
-    /// Init frames that searched the bed again for a raised section ([`TrackerConfig::section_looks`]).
-    section_looks: u16,
     shape_sum: [f32; SHAPE_COMPONENTS],
     shape_n: u16,
     /// Lock refits still to run (set when the init phase estimated the shape).
@@ -442,7 +433,6 @@ impl Init {
     const fn new() -> Self {
         Init {
             bed: None,
-            section_looks: 0,
             shape_sum: [0.0; SHAPE_COMPONENTS],
             shape_n: 0,
             refits_left: 0,
@@ -875,32 +865,28 @@ impl<'m, 's> Tracker<'m, 's> {
         report: &mut FrameReport,
     ) {
         let bed = match self.init.bed {
-            Some(b) if b.head_section.is_some() || self.init.section_looks >= self.cfg.section_looks => b,
-            Some(b) => {
-                // One frame's search can miss a raised section that the next finds (its RANSAC draw; the mattress
-                // beside a steep section mostly hidden): look again, and start the shape estimate over on a bed
-                // with a section, since the frames before were clipped without it.
-                self.init.section_looks += 1;
-                match self.find_bed(frame) {
-                    Ok(found) if found.head_section.is_some() => {
-                        self.init.bed = Some(found);
-                        self.init.shape_sum = [0.0; SHAPE_COMPONENTS];
-                        self.init.shape_n = 0;
-                        found
+            Some(b) => b,
+            None => {
+                let mut cfg = self.cfg.planes;
+                cfg.seed = mix_seed(cfg.seed ^ self.cfg.seed, self.frames as u64);
+                match planes::estimate_bed(
+                    frame,
+                    &self.k,
+                    &cfg,
+                    self.cfg.up_camera.as_ref(),
+                    self.scratch.plane_points,
+                    self.scratch.plane_labels,
+                ) {
+                    Ok(b) => {
+                        self.init.bed = Some(b);
+                        b
                     }
-                    _ => b,
+                    Err(_) => {
+                        watch.lap(clock, Stage::Init);
+                        return;
+                    }
                 }
             }
-            None => match self.find_bed(frame) {
-                Ok(b) => {
-                    self.init.bed = Some(b);
-                    b
-                }
-                Err(_) => {
-                    watch.lap(clock, Stage::Init);
-                    return;
-                }
-            },
         };
         if let Some(z) = self.cfg.known_shape {
             self.finish_init(frame, &bed, None, z, clock, watch);
@@ -929,20 +915,6 @@ impl<'m, 's> Tracker<'m, 's> {
             self.finish_init(frame, &bed, Some(&observed), z, clock, watch);
         }
         watch.lap(clock, Stage::Init);
-    }
-
-    /// The bed in `frame` (the plane search seeded by the frame count, so each init frame draws anew).
-    fn find_bed(&mut self, frame: &DepthFrame<'_>) -> Result<BedScene, planes::PlaneError> {
-        let mut cfg = self.cfg.planes;
-        cfg.seed = mix_seed(cfg.seed ^ self.cfg.seed, self.frames as u64);
-        planes::estimate_bed(
-            frame,
-            &self.k,
-            &cfg,
-            self.cfg.up_camera.as_ref(),
-            self.scratch.plane_points,
-            self.scratch.plane_labels,
-        )
     }
 
     fn finish_init(

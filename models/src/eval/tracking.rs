@@ -100,10 +100,6 @@ pub struct TrackingEvalArgs {
     /// tracker's).
     #[arg(long)]
     pub refit_stride: Option<u16>,
-    /// The tracker's `section_looks`: init frames that search the bed again while it has no raised head section
-    /// (default: the tracker's, 10; 0: the first frame's bed stays, as before 2026-12-04's sixteenth round).
-    #[arg(long)]
-    pub section_looks: Option<u16>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
     /// in fits from every start but the temporal one.
     #[arg(long, value_parser = parse_weight)]
@@ -338,9 +334,6 @@ pub fn run_variant(
     }
     if let Some(n) = args.refit_stride {
         cfg.refit_stride = n;
-    }
-    if let Some(n) = args.section_looks {
-        cfg.section_looks = n;
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
