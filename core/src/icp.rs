@@ -410,18 +410,21 @@ mod tests {
         assert!(!params.is_bed(&Point3::new(0.1, -0.5, 0.1)));
     }
 
+    /// A 64x48 camera for frames small enough to write out in a test.
+    const SMALL_CAMERA: Intrinsics = Intrinsics {
+        fx: 60.0,
+        fy: 60.0,
+        cx: 31.5,
+        cy: 23.5,
+        width: 64,
+        height: 48,
+    };
+
     #[test]
     fn a_prior_row_moves_the_pose_where_the_pairs_leave_it_free() {
         // A flat wall 1 m in front of a small camera: the pairs fix depth, pitch and roll, and leave the slide
         // across the wall free; a row asking for x 1 cm lower takes the step there and changes nothing else.
-        let k = Intrinsics {
-            fx: 60.0,
-            fy: 60.0,
-            cx: 31.5,
-            cy: 23.5,
-            width: 64,
-            height: 48,
-        };
+        let k = SMALL_CAMERA;
         let depth = [1000u16; 64 * 48];
         let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
         let mut points = [Point3::origin(); 25];
@@ -468,14 +471,7 @@ mod tests {
         // A bumpy surface with a hole and a depth edge, and model points near it: the pairs found without a memo,
         // with a fresh memo (every normal computed) and with the same memo again (every normal read back) agree
         // to the bit, and a memo of another normal step is bypassed.
-        let k = Intrinsics {
-            fx: 60.0,
-            fy: 60.0,
-            cx: 31.5,
-            cy: 23.5,
-            width: 64,
-            height: 48,
-        };
+        let k = SMALL_CAMERA;
         let mut depth = [0u16; 64 * 48];
         for (i, d) in depth.iter_mut().enumerate() {
             let (u, v) = ((i % 64) as f32, (i / 64) as f32);

@@ -84,10 +84,16 @@ impl NormalMemo<'_> {
         self.step_px
     }
 
-    /// The normal at pixel (`u`, `v`) (inside the image), computed by `compute` on the first call of this frame.
+    /// The normal at pixel (`u`, `v`), computed by `compute` on the first call of this frame (and on every call
+    /// for a pixel outside the cells).
     #[inline]
     pub fn get_or(&self, u: i32, v: i32, compute: impl FnOnce() -> Option<[f32; 3]>) -> Option<[f32; 3]> {
-        let Some(cell) = self.cells.get(v as usize * self.width as usize + u as usize) else {
+        let w = self.width as usize;
+        let cell = match (usize::try_from(u), usize::try_from(v)) {
+            (Ok(u), Ok(v)) if u < w => v.checked_mul(w).and_then(|r| self.cells.get(r + u)),
+            _ => None,
+        };
+        let Some(cell) = cell else {
             return compute();
         };
         let c = cell.get();
@@ -141,9 +147,11 @@ mod tests {
             Some([1.0, 0.0, 0.0])
         );
         assert_eq!(calls.get(), 3);
-        // Outside the cells: computed every time.
-        assert_eq!(m.get_or(0, 5, || count(None)), None);
-        assert_eq!(calls.get(), 4);
+        // Outside the cells (below, left, above, right of them): computed every time, never another pixel's.
+        for (u, v) in [(0, 5), (-1, 0), (0, -1), (3, 0)] {
+            assert_eq!(m.get_or(u, v, || count(None)), None);
+        }
+        assert_eq!(calls.get(), 7);
     }
 
     #[test]
