@@ -439,12 +439,7 @@ pub fn run_variant(
         );
         if let (Some(pose), Some(surface), Some(tt)) = (r.camera_from_torso, tracker.surface(), full.as_ref())
         {
-            let estimated: Vec<[f32; 3]> = surface
-                .vertices()
-                .iter()
-                .map(|v| (pose * v).coords.into())
-                .collect();
-            s.torso_mm = Some(tt.torso_surface_error_mm(&estimated, i as u32)?);
+            s.torso_mm = Some(tt.torso_error_at_mm(surface.vertices(), &pose, i as u32)?);
             s.torso_floor_mm = tt.rigid_floor_mm(surface.vertices(), i as u32)?;
             if args.oracle_start && i.is_multiple_of(ORACLE_EVERY) {
                 s.oracle_fit = oracle_fit(&tracker, &frame, &k, tt, &surface, &r, i as u32)?;
@@ -569,18 +564,13 @@ fn oracle_fit(
         &clock,
         &Stopwatch::start(&clock),
     );
-    let posed: Vec<[f32; 3]> = surface
-        .vertices()
-        .iter()
-        .map(|v| (pose * v).coords.into())
-        .collect();
     Ok(Some(OracleFit {
         support: fit.support(),
         own_support: r.fit.support(),
         rms_mm: fit.association.rms_m() * 1000.0,
         pairs: fit.association.pairs,
         visible: fit.visible,
-        torso_mm: tt.torso_surface_error_mm(&posed, f)?,
+        torso_mm: tt.torso_error_at_mm(surface.vertices(), &pose, f)?,
     }))
 }
 

@@ -296,8 +296,13 @@ impl TrackingTruth {
         let Some(best) = self.rigid_best(model, f)? else {
             return Ok(None);
         };
-        let aligned: Vec<[f32; 3]> = model.iter().map(|v| (best * v).coords.into()).collect();
-        self.torso_surface_error_mm(&aligned, f).map(Some)
+        self.torso_error_at_mm(model, &best, f).map(Some)
+    }
+
+    /// [`TrackingTruth::torso_surface_error_mm`] of `model` (torso vertices) placed in the camera frame by `pose`.
+    pub fn torso_error_at_mm(&self, model: &[Point3<f32>], pose: &Isometry3<f32>, f: u32) -> Result<f32> {
+        let placed: Vec<[f32; 3]> = model.iter().map(|v| (pose * v).coords.into()).collect();
+        self.torso_surface_error_mm(&placed, f)
     }
 
     /// Salient-point error of frame `f` for estimated points in the camera frame (metres, [`SalientPoint`] order).
