@@ -188,8 +188,10 @@ const BASE_MAX_BELOW_SECTION_M: f32 = 0.35;
 /// section is all that shows of the bed, the mattress is taken this far above it.
 const NOMINAL_MATTRESS_THICKNESS_M: f32 = 0.15;
 /// How far above the mattress the lowest visible part of a raised head section can lie, metres: the patient's hips
-/// hide the hinge, and beside them the arm or the view can hide the section's lower edge too (14 cm on s402).
-const SECTION_BOTTOM_HIDDEN_M: f32 = 0.15;
+/// hide the hinge, and beside them the arm or the view can hide the section's lower edge too (14 cm on s402; 15-16
+/// cm on s34011's 42° section, missed in three of its first five frames at 0.15 m). At 0.20 m the first three frames
+/// of 442 stored sequences (329 flat beds) show no false section (docs/tracking.md, seventeenth round).
+const SECTION_BOTTOM_HIDDEN_M: f32 = 0.20;
 /// Most planes searched for (floor, mattress, head section, the flat top of what lies on it, a wall).
 const MAX_PLANES: usize = 5;
 /// With the bed's base bared under a raised section, the flat mattress lies parallel to it within this angle,
@@ -478,9 +480,7 @@ pub fn estimate_bed(
             // The patient's hips and the arm can hide the hinge but for a few points; the larger plane's lowest
             // points near the mattress show it rises from there just as well.
             rises_from_the_hinge(p, points, &mattress, cfg)
-                || larger.is_some_and(|(l, h)| {
-                    l == *i as u8 + 1 && h > -SECTION_BELOW_MATTRESS_M && h < SECTION_BOTTOM_HIDDEN_M
-                })
+                || larger.is_some_and(|(l, h)| l == *i as u8 + 1 && bottom_may_be_hidden(h))
         })
         .filter(|(i, (p, _))| spans_the_bed(p, &mattress.normal(), points, labels, *i as u8 + 1, found))
         .filter(|(i, (p, _))| one_surface(surface_agreement(frame, k, p, points, labels, *i as u8 + 1)))
@@ -593,6 +593,12 @@ fn rises_from_the_hinge(plane: &Plane, points: &[Point3], mattress: &Plane, cfg:
         && at_hinge * HINGE_SHARE_INV >= n
         && below * 20 < n
         && above * 20 < n
+}
+
+/// Whether a raised section whose lowest visible points lie `h` metres above the mattress can still rise from it
+/// (the hinge and its lowest [`SECTION_BOTTOM_HIDDEN_M`] hidden), rather than start higher up (a body surface).
+fn bottom_may_be_hidden(h: f32) -> bool {
+    h > -SECTION_BELOW_MATTRESS_M && h < SECTION_BOTTOM_HIDDEN_M
 }
 
 /// The lowest part of the largest plane that is tilted like a raised head section (10-70° from `up`) and spans the
@@ -1491,6 +1497,19 @@ mod tests {
         let along = camera_from_world.inverse().rotation
             * (bed.volume.bed_from_camera.inverse().rotation * Vector3::y());
         assert!(along.y > 0.99, "long axis {along:?}");
+    }
+
+    #[test]
+    fn a_sections_bottom_may_hide_up_to_twenty_centimetres_above_the_mattress() {
+        // s402's lowest visible section point (14 cm), s34011's (14.8-16.0 cm in its first frames).
+        for h in [0.0, 0.14, 0.148, 0.155, 0.16] {
+            assert!(bottom_may_be_hidden(h), "{h}");
+        }
+        // A tilted body surface lying on a flat bed starts a torso's depth up; a plane running below the mattress
+        // is the bed's side or the floor.
+        for h in [0.22, 0.3, -0.1] {
+            assert!(!bottom_may_be_hidden(h), "{h}");
+        }
     }
 
     #[test]
