@@ -115,7 +115,7 @@ pub struct Init {
 impl Default for Init {
     fn default() -> Self {
         Init {
-            shape_frames: Spanned::new(0..0, 30),
+            shape_frames: Spanned::new(0..0, 10),
             timeout_s: Spanned::new(0..0, 120.0),
         }
     }
@@ -150,7 +150,8 @@ pub struct Extrinsic {
 /// Ranges the numeric keys accept (inclusive).
 const FRAME_MS: (f64, f64) = (1.0, 1000.0);
 const ICP_ITERATIONS: (u32, u32) = (0, 100);
-const SHAPE_FRAMES: (u32, u32) = (1, 900);
+/// At most what the tracker's init phase keeps ([`supine_core::shape::combine::MAX_SHAPE_FRAMES`]).
+const SHAPE_FRAMES: (u32, u32) = (1, supine_core::shape::combine::MAX_SHAPE_FRAMES as u32);
 const TIMEOUT_S: (f64, f64) = (1.0, 3600.0);
 
 /// A checked configuration: the file's values turned into the types the service uses.
@@ -406,7 +407,7 @@ rotation_quat_wxyz = [1.0, 0.0, 0.0, 0.0]
         let c = parse(GOOD, Path::new("s.toml")).unwrap();
         assert_eq!(c.frame_budget_us, 25_000);
         assert_eq!(c.icp_iterations, 8);
-        assert_eq!(c.shape_frames, 30);
+        assert_eq!(c.shape_frames, 10);
         assert_eq!(
             c.joint_forest,
             PathBuf::from("/usr/share/supine/models/joints.sbm")
@@ -435,6 +436,12 @@ rotation_quat_wxyz = [1.0, 0.0, 0.0, 0.0]
         let e = err(&range);
         assert!(
             e.contains("s.toml:10:") && e.contains("out of range") && e.contains("1 to 1000"),
+            "{e}"
+        );
+        // More init frames than the tracker keeps.
+        let e = err(&format!("{GOOD}\n[init]\nshape_frames = 65\n"));
+        assert!(
+            e.contains("init.shape_frames") && e.contains("65 is out of range") && e.contains("1 to 64"),
             "{e}"
         );
         let src = GOOD.replace("file:/tmp/rec.oni", "kinect");

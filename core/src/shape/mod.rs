@@ -29,6 +29,7 @@
 //! ([`ShapeModelView::pixels`] f32).
 
 pub mod canonical;
+pub mod combine;
 pub mod forest;
 pub mod linear;
 pub mod subspace;

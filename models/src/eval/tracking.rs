@@ -26,6 +26,7 @@ use supine_core::body_model::SHAPE_COMPONENTS;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::geometry::{Isometry3, Point3, Vector3};
+use supine_core::shape::combine::{MAX_SHAPE_FRAMES, ShapeCombine};
 use supine_core::torso::TorsoSurface;
 use supine_core::tracker::accuracy::{self, TrackedFrame, TruthFrame};
 use supine_core::tracker::budget::{Stage, Stopwatch};
@@ -132,6 +133,17 @@ pub struct TrackingEvalArgs {
     /// the tracker's, 0.4).
     #[arg(long, value_parser = parse_visible_share)]
     pub refit_late_min_visible: Option<f32>,
+    /// The tracker's `shape_frames`: init frames whose shape estimates are combined (default: the tracker's; at
+    /// most 64).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=MAX_SHAPE_FRAMES as i64))]
+    pub shape_frames: Option<u16>,
+    /// The tracker's `shape_combine`: how the init frames' shape estimates are combined (default: the tracker's).
+    #[arg(long, value_parser = ["mean", "median"])]
+    pub shape_combine: Option<String>,
+    /// The tracker's `icp.acquire_min_visible`: the share of the torso model a fit made without a pose must see
+    /// (default: the tracker's).
+    #[arg(long, value_parser = parse_visible_share)]
+    pub acquire_min_visible: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -328,6 +340,17 @@ pub fn run_variant(
     }
     if let Some(n) = args.lock_refits {
         cfg.lock_refits = n;
+    }
+    if let Some(v) = args.acquire_min_visible {
+        cfg.icp.acquire_min_visible = v;
+    }
+    if let Some(n) = args.shape_frames {
+        cfg.shape_frames = n;
+    }
+    match args.shape_combine.as_deref() {
+        Some("mean") => cfg.shape_combine = ShapeCombine::Mean,
+        Some("median") => cfg.shape_combine = ShapeCombine::Median,
+        _ => {}
     }
     if let Some(l) = args.refit_lambda {
         cfg.refit_lambda = l;

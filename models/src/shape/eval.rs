@@ -499,7 +499,7 @@ pub fn evaluate(
         for (views, stats) in [(&per_view, &mut multi), (&per_view_comb, &mut multi_comb)] {
             for (i, &n) in ns.iter().enumerate() {
                 if views.len() >= n {
-                    let z = median_shape(&views[..n]);
+                    let z = supine_core::shape::combine::median_shape(&views[..n]);
                     let e = vertex_errors(model, &pose, &z, &truth_posed, &mask);
                     stats[i].add(&z, &truth_shape, &e);
                 }
@@ -554,20 +554,6 @@ pub fn evaluate(
         );
     }
     Ok(report)
-}
-
-/// Per-coefficient median of shape estimates (the robust combination of several frames).
-fn median_shape(views: &[[f32; 20]]) -> [f32; 20] {
-    let n = views.len();
-    std::array::from_fn(|c| {
-        let mut v: Vec<f32> = views.iter().map(|s| s[c]).collect();
-        v.sort_by(f32::total_cmp);
-        if n % 2 == 1 {
-            v[n / 2]
-        } else {
-            0.5 * (v[n / 2 - 1] + v[n / 2])
-        }
-    })
 }
 
 /// The workspace's commit (short hash, `-dirty` when the tree has changes), or "unknown".
