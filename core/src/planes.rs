@@ -584,7 +584,9 @@ fn rises_from_the_hinge(plane: &Plane, points: &[Point3], mattress: &Plane, cfg:
             let h = mattress.signed_distance(q);
             n += 1;
             at_hinge += (h < HINGE_BAND_M) as u32;
-            below += (h < -HINGE_BAND_M) as u32;
+            // Not below: the floor's strip where the plane crosses it, at least a bed's height down (a far floor
+            // comes in depth layers a few centimetres apart, so that strip can hold 5 % of a section's band).
+            below += (h < -HINGE_BAND_M && h > -FLOOR_TO_MATTRESS_M.0) as u32;
             above += (h > cfg.max_height_m) as u32;
         }
     }
@@ -1375,6 +1377,17 @@ mod tests {
             .collect();
         let pd = Plane::through(Vector3::new(0.0, -0.3 * 0.766 / 0.643, -0.3), pd.normal());
         assert!(!rises_from_the_hinge(&pd, &deep, &mattress, &cfg));
+        // The section with the floor's strip 0.6 m down in its band (three rows of the plane's extension, 6 % of
+        // its points; s33022, s33011): still a section.
+        let (mut with_strip, ps) = plate(40.0, 0.0, 0.6);
+        let (sn, cs) = (libm::sinf(40f32.to_radians()), libm::cosf(40f32.to_radians()));
+        for row in 0..3 {
+            let along = -(0.6 + row as f32 * 0.0125) / sn;
+            for i in 0..26 {
+                with_strip.push(Point3::new(-0.25 + i as f32 * 0.02, along * cs, along * sn));
+            }
+        }
+        assert!(rises_from_the_hinge(&ps, &with_strip, &mattress, &cfg));
     }
 
     #[test]
