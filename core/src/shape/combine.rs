@@ -1,7 +1,8 @@
-//! The robust combination of several frames' shape estimates (the init phase's multi-frame estimate): the
-//! per-coefficient median, so that a frame whose salient points were grossly off (the arm taken for a shoulder)
-//! moves the estimate no more than a frame that is slightly off. Caller-held estimates, no allocation.
-//! Cost: 20 sorts of at most [`MAX_SHAPE_FRAMES`] values, a few µs.
+//! Several frames' shape estimates made one (the init phase's multi-frame estimate): the per-coefficient mean (the
+//! tracker's default) or the per-coefficient median, with which a frame whose salient points were grossly off (the
+//! arm taken for a shoulder) moves the estimate no more than a frame slightly off (the shape evaluation's
+//! multi-frame estimate). Caller-held estimates, no allocation. Cost: 20 sums, or 20 sorts of at most
+//! [`MAX_SHAPE_FRAMES`] values; a few µs, once per init phase.
 
 use crate::body_model::SHAPE_COMPONENTS;
 
@@ -11,7 +12,7 @@ pub const MAX_SHAPE_FRAMES: usize = 64;
 /// How the init phase combines its frames' shape estimates.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ShapeCombine {
-    /// The per-coefficient mean (the tracker's rule before 2026-12-05).
+    /// The per-coefficient mean ([`mean_shape`]; the tracker's default).
     Mean,
     /// The per-coefficient median ([`median_shape`]).
     Median,
