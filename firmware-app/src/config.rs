@@ -7,6 +7,7 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 use supine_core::geometry::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use supine_core::tracker::TrackerConfig;
 use supine_drivers::SourceSpec;
 use supine_drivers::link::LinkSpec;
 use toml::Spanned;
@@ -97,7 +98,7 @@ impl Default for Budget {
     fn default() -> Self {
         Budget {
             frame_ms: Spanned::new(0..0, 30.0),
-            icp_iterations: Spanned::new(0..0, 10),
+            icp_iterations: Spanned::new(0..0, TrackerConfig::default().budget.icp_iterations.into()),
         }
     }
 }
@@ -115,7 +116,9 @@ pub struct Init {
 impl Default for Init {
     fn default() -> Self {
         Init {
-            shape_frames: Spanned::new(0..0, 10),
+            // The tracker's own default, which every tracking figure measures (a separate literal had drifted to
+            // 30 before 2026-12-05).
+            shape_frames: Spanned::new(0..0, TrackerConfig::default().shape_frames.into()),
             timeout_s: Spanned::new(0..0, 120.0),
         }
     }
