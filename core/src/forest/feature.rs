@@ -1,8 +1,8 @@
 //! Depth-difference features f = d(x + u/d(x)) - d(x + v/d(x)) (Shotton et al. 2011) with offsets `u`, `v` in
 //! pixel·metres (so ±50 means ±50 px at 1 m) and depths in integer millimetres. Off-image and no-depth probes read
 //! [`BACKGROUND_MM`]. Everything is integer, so the trainer and the head computer take the same branch bit for bit.
-//! The division by depth is done once per sample ([`ProbeScale`], 16.16 fixed point); a test then costs four
-//! multiply-shifts and two depth reads.
+//! The division by depth is done once per sample ([`ProbeScale`], 16.16 fixed point; with the sample's pixel in
+//! [`ProbeOrigin`]); a test then costs four multiply-add-shifts and two depth reads.
 
 use crate::depth::DepthFrame;
 
@@ -78,13 +78,51 @@ impl ProbeScale {
     }
 }
 
+/// A sample's pixel in 16.16 fixed point with the rounding half already added, and its offset scale: a probe's
+/// pixel is then one multiply-add and a shift per axis, the same pixel as `x + s.pixels(o)` (the sample's whole
+/// pixels pass through the shift unchanged, so the sum rounds as the offset alone does).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ProbeOrigin {
+    x: i32,
+    y: i32,
+    s: i32,
+}
+
+impl ProbeOrigin {
+    /// The origin of probes from pixel (x, y) with scale `s` (|x|, |y| < 2^14).
+    #[inline]
+    pub fn new(x: i32, y: i32, s: ProbeScale) -> Self {
+        ProbeOrigin {
+            x: (x << 16) + (1 << 15),
+            y: (y << 16) + (1 << 15),
+            s: s.0,
+        }
+    }
+
+    /// The pixel at offset `off`, pixel·metres.
+    #[inline]
+    pub fn pixel(self, off: [i8; 2]) -> (i32, i32) {
+        (
+            (self.x + off[0] as i32 * self.s) >> 16,
+            (self.y + off[1] as i32 * self.s) >> 16,
+        )
+    }
+
+    /// The depth the probe at offset `off` reads ([`probe`]'s value).
+    #[inline]
+    pub fn probe<D: DepthImage + ?Sized>(self, img: &D, off: [i8; 2]) -> i32 {
+        let (x, y) = self.pixel(off);
+        match img.depth_at(x, y) {
+            0 => BACKGROUND_MM,
+            z => z as i32,
+        }
+    }
+}
+
 /// The depth a probe at offset `off` from pixel (x, y) with scale `s` reads.
 #[inline]
 pub fn probe<D: DepthImage + ?Sized>(img: &D, x: i32, y: i32, s: ProbeScale, off: [i8; 2]) -> i32 {
-    match img.depth_at(x + s.pixels(off[0]), y + s.pixels(off[1])) {
-        0 => BACKGROUND_MM,
-        z => z as i32,
-    }
+    ProbeOrigin::new(x, y, s).probe(img, off)
 }
 
 impl SplitTest {
@@ -92,6 +130,12 @@ impl SplitTest {
     #[inline]
     pub fn feature<D: DepthImage + ?Sized>(&self, img: &D, x: i32, y: i32, s: ProbeScale) -> i32 {
         probe(img, x, y, s, self.u) - probe(img, x, y, s, self.v)
+    }
+
+    /// [`Self::goes_left`] from a probe origin.
+    #[inline]
+    pub fn goes_left_from<D: DepthImage + ?Sized>(&self, img: &D, o: ProbeOrigin) -> bool {
+        o.probe(img, self.u) - o.probe(img, self.v) < self.threshold_mm as i32
     }
 
     /// Whether the sample goes to the left child.
@@ -127,6 +171,26 @@ mod tests {
         };
         assert_eq!(t.feature(&f, 50, 5, ProbeScale::new(1000)), 20);
         assert!(!t.goes_left(&f, 50, 5, ProbeScale::new(1000)));
+    }
+
+    #[test]
+    fn a_probe_origin_reaches_the_pixel_the_offset_scale_gives() {
+        // Every stored offset at depths from the scale's floor to beyond the sensor's range, from pixels at the
+        // image's edges and inside: the fixed-point origin must land where `x + s.pixels(o)` does.
+        for d in (0..=5000u16).step_by(7).chain([1, 99, 100, 101, 65535]) {
+            let s = ProbeScale::new(d);
+            for (x, y) in [(0, 0), (639, 479), (1, 478), (320, 240), (-3, 500)] {
+                let o = ProbeOrigin::new(x, y, s);
+                for a in -128..=127i8 {
+                    let b = a.wrapping_mul(37);
+                    assert_eq!(
+                        o.pixel([a, b]),
+                        (x + s.pixels(a), y + s.pixels(b)),
+                        "depth {d}, pixel ({x}, {y}), offset ({a}, {b})"
+                    );
+                }
+            }
+        }
     }
 
     #[test]

@@ -5,7 +5,7 @@
 //! Cost: samples x trees x depth node tests, then per point one vote pass and one mean-shift.
 
 use crate::camera::Intrinsics;
-use crate::forest::feature::{DepthImage, ProbeScale};
+use crate::forest::feature::{DepthImage, ProbeOrigin, ProbeScale};
 use crate::forest::meanshift::{Prior, Vote, VoteBuffer, mean_shift};
 use crate::forest::model::{ForestModel, Node};
 use crate::forest::sample::{Clip, SamplePixel, sample_pixels};
@@ -134,11 +134,11 @@ fn step<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     t: usize,
     at: u32,
     img: &D,
-    (x, y, s): (i32, i32, ProbeScale),
+    o: ProbeOrigin,
 ) -> (u32, bool) {
     match model.node(t, at) {
         Node::Leaf(_) => (at, true),
-        Node::Split { test, left } => (left + u32::from(!test.goes_left(img, x, y, s)), false),
+        Node::Split { test, left } => (left + u32::from(!test.goes_left_from(img, o)), false),
     }
 }
 
@@ -154,15 +154,35 @@ fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     order: &mut [u16],
     leaves: &mut [[u32; MAX_TREES]],
 ) {
-    let trees = trees.min(MAX_TREES);
+    // The tree count as a constant: the lockstep loop then unrolls over the trees without a count check per lane.
+    // The last arm is exactly MAX_TREES trees (callers pass at most that).
+    const _: () = assert!(MAX_TREES == 4, "descend_samples dispatches on 1-4 trees");
+    match trees {
+        0 => {}
+        1 => descend_samples_n::<1, M, D>(model, img, samples, order, leaves),
+        2 => descend_samples_n::<2, M, D>(model, img, samples, order, leaves),
+        3 => descend_samples_n::<3, M, D>(model, img, samples, order, leaves),
+        _ => descend_samples_n::<MAX_TREES, M, D>(model, img, samples, order, leaves),
+    }
+}
+
+/// [`descend_samples`] for `T` trees.
+fn descend_samples_n<const T: usize, M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    img: &D,
+    samples: &[SamplePixel],
+    order: &mut [u16],
+    leaves: &mut [[u32; MAX_TREES]],
+) {
+    let trees = T;
     let order = &mut order[..samples.len()];
     band_order(samples, order);
     for group in order.chunks(GROUP) {
         let mut at = [[0u32; MAX_TREES]; GROUP];
-        let mut px = [(0i32, 0i32, ProbeScale::new(0)); GROUP];
+        let mut px = [ProbeOrigin::new(0, 0, ProbeScale::new(0)); GROUP];
         for (g, &i) in group.iter().enumerate() {
             let s = &samples[i as usize];
-            px[g] = (s.x as i32, s.y as i32, ProbeScale::new(s.d_mm));
+            px[g] = ProbeOrigin::new(s.x as i32, s.y as i32, ProbeScale::new(s.d_mm));
         }
         loop {
             let mut done = true;
