@@ -5,7 +5,8 @@
 //! is its partner when it lies above the mattress margin (and above the raised head section's, when the bed has
 //! one), within `max_distance_m` (the paper's 0.1 m), and not in front of the model point by more than
 //! `occluder_margin_m`: points in front of the model surface belong to whatever occludes the body (the robot arm, a
-//! raised hand) and are counted, not fitted. The observed normal comes from the depth neighbours `normal_step_px`
+//! raised hand) and are counted, not fitted, unless they lie lower over the bed than a lying patient's front reaches
+//! (`body_max_height_m`): those are the patient, in front of a model that has sunk behind them. The observed normal comes from the depth neighbours `normal_step_px`
 //! away.
 //!
 //! Cost: per model point one projection, three unprojections and a 6x6 outer product (~80 flops): 1.2 k torso
@@ -40,6 +41,9 @@ pub struct IcpParams {
     /// An observed point farther from the camera than its model point by more than this is not its partner (the
     /// camera sees past the model's edge onto the arms or the bed), metres; infinite keeps such pairs.
     pub behind_margin_m: f32,
+    /// An observed point in front of its model point by more than `occluder_margin_m` but lower than this above the
+    /// bed is the patient, not an occluder, and is paired (metres; 0: off, every such point is an occluder).
+    pub body_max_height_m: f32,
 }
 
 impl IcpParams {
@@ -53,12 +57,19 @@ impl IcpParams {
             above_mattress_m: 0.015,
             normal_step_px: NORMAL_STEP_PX,
             behind_margin_m: f32::INFINITY,
+            body_max_height_m: 0.0,
         }
     }
 
     /// Whether an observed point (camera frame) is bed: less than `above_mattress_m` above the bed's surface.
     pub fn is_bed(&self, o: &Point3) -> bool {
         self.above_bed(o).0 < self.above_mattress_m
+    }
+
+    /// Whether an observed point `o` (camera frame) in front of the model surface occludes it: it is not the
+    /// patient's own front, which lies less than `body_max_height_m` above the bed.
+    pub fn occludes(&self, o: &Point3) -> bool {
+        self.body_max_height_m <= 0.0 || self.above_bed(o).0 >= self.body_max_height_m
     }
 
     /// Height of `p` (camera frame) above the bed's surface, the higher of the mattress and the raised head section,
@@ -163,7 +174,7 @@ pub fn partner(
     let Some(o) = observed(frame, k, u, v) else {
         return Ok(None);
     };
-    if o.z < p_cam.z - params.occluder_margin_m {
+    if o.z < p_cam.z - params.occluder_margin_m && params.occludes(&o) {
         return Err(());
     }
     partner_of(frame, k, p_cam, o, u, v, params)
@@ -464,6 +475,64 @@ mod tests {
             "{t:?}"
         );
         assert!(held.rotation.angle() < 1e-4);
+    }
+
+    #[test]
+    fn a_front_low_over_the_bed_is_the_patient_and_pulls_a_sunk_model_out() {
+        // A flat front 1 m from the camera, 20 cm above a bed whose surface is z = 1.2 (normal toward the camera),
+        // and a model sunk 6 cm behind it: past the 4 cm occluder margin.
+        let k = SMALL_CAMERA;
+        let depth = [1000u16; 64 * 48];
+        let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
+        let mut points = [Point3::origin(); 25];
+        for (i, p) in points.iter_mut().enumerate() {
+            *p = Point3::new(-0.2 + 0.1 * (i % 5) as f32, -0.2 + 0.1 * (i / 5) as f32, 1.06);
+        }
+        let normals = [Vector3::new(0.0, 0.0, -1.0); 25];
+        let bed = Plane::through(Vector3::new(0.0, 0.0, 1.2), Vector3::new(0.0, 0.0, -1.0));
+        let step = |h: f32| {
+            let params = IcpParams {
+                body_max_height_m: h,
+                ..IcpParams::new(bed)
+            };
+            robust_point_to_plane_step(
+                &frame,
+                &k,
+                &points,
+                Some(&normals[..]),
+                1,
+                &Isometry3::identity(),
+                &params,
+                f32::INFINITY,
+                &[],
+            )
+        };
+        // Off, or a limit below the front's height: the front is an occluder, nothing pairs.
+        for h in [0.0, 0.18] {
+            let a = associate(
+                &frame,
+                &k,
+                &points,
+                Some(&normals[..]),
+                1,
+                &Isometry3::identity(),
+                &IcpParams {
+                    body_max_height_m: h,
+                    ..IcpParams::new(bed)
+                },
+                |_, _, _, _| {},
+            );
+            assert_eq!((a.pairs, a.occluded), (0, 25), "limit {h}");
+            assert!(step(h).is_err(), "limit {h}");
+        }
+        // Over the front's height: it is the patient, every point pairs and the step brings the model onto it.
+        let (pose, a) = step(0.22).unwrap();
+        assert_eq!((a.pairs, a.occluded), (25, 0));
+        let t = pose.translation.vector;
+        assert!(
+            (t.z + 0.06).abs() < 1e-4 && t.x.abs() < 1e-5 && t.y.abs() < 1e-5,
+            "{t:?}"
+        );
     }
 
     #[test]

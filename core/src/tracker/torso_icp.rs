@@ -76,6 +76,16 @@ pub struct TorsoIcpConfig {
     pub follow_rad: f32,
     /// An occluder is an observed point this much nearer to the camera than the model surface, metres.
     pub occluder_margin_m: f32,
+    /// Observed points in front of the model but lower than this above the bed are the patient, not an occluder
+    /// ([`IcpParams::body_max_height_m`]; 0: off), metres. A fit that has sunk behind the patient's front, or slid
+    /// off it, otherwise counts the front it should hold as the arm: it fits the little it still pairs, sees a
+    /// fifth of the torso, and coasts there as occluded (the wrong locks that never recover after the full
+    /// occlusion). 0.22 since 2026-12-05: on the 146 validation sequences 0 / 0.18 / 0.22 / 0.26 gave a torso error
+    /// of 12.22 / 10.87 / 10.63 / 11.03 mm (medians 6.22 / 6.09 / 6.04 / 6.17), a probe error of 10.96 / 10.82 /
+    /// 10.37 / 10.48 mm, tracked 0.979 / 0.973 / 0.979 / 0.975 and recovery within 5 frames on 117 / 122 / 124 / 120;
+    /// on 34001-34100 13.75 -> 11.86 mm at 0.22 (median 6.95 -> 7.15), probe 12.35 -> 11.22 mm. Higher takes in
+    /// the patient's own arms lying on the torso (0.30: 12.95 mm there, tracked 0.976; docs/tracking.md).
+    pub body_max_height_m: f32,
     /// Largest model-to-observed distance of a pair, metres.
     pub max_distance_m: f32,
     /// An observed point this much farther than the model surface is not a partner, metres (see
@@ -132,6 +142,7 @@ impl Default for TorsoIcpConfig {
             follow_m: 0.06,
             follow_rad: 0.2,
             occluder_margin_m: 0.04,
+            body_max_height_m: 0.22,
             max_distance_m: 0.1,
             behind_margin_m: 0.04,
             bed_pitch_weight: 0.0,
@@ -229,6 +240,7 @@ pub fn icp_params(cfg: &TorsoIcpConfig, bed: &BedScene) -> IcpParams {
         max_distance_m: cfg.max_distance_m,
         occluder_margin_m: cfg.occluder_margin_m,
         head_section: bed.head_section,
+        body_max_height_m: cfg.body_max_height_m,
         ..IcpParams::new(bed.mattress)
     }
 }

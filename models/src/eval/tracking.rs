@@ -144,6 +144,10 @@ pub struct TrackingEvalArgs {
     /// (default: the tracker's).
     #[arg(long, value_parser = parse_visible_share)]
     pub acquire_min_visible: Option<f32>,
+    /// The tracker's `icp.body_max_height_m`: observed points in front of the torso model but lower than this
+    /// above the bed are the patient, not the arm (default: the tracker's; 0: off, as before 2026-12-05)
+    #[arg(long, value_parser = parse_body_height)]
+    pub body_max_height: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -168,6 +172,13 @@ fn parse_visible_share(s: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
         _ => Err(format!("`{s}` is not a share of the torso (0 to 1)")),
+    }
+}
+
+fn parse_body_height(s: &str) -> std::result::Result<f32, String> {
+    match s.parse::<f32>() {
+        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
+        _ => Err(format!("`{s}` is not a height above the bed in metres (0 to 1)")),
     }
 }
 
@@ -343,6 +354,9 @@ pub fn run_variant(
     }
     if let Some(v) = args.acquire_min_visible {
         cfg.icp.acquire_min_visible = v;
+    }
+    if let Some(h) = args.body_max_height {
+        cfg.icp.body_max_height_m = h;
     }
     if let Some(n) = args.shape_frames {
         cfg.shape_frames = n;
