@@ -431,18 +431,23 @@ mod tests {
         height: 48,
     };
 
+    /// A flat wall 1 m from [`SMALL_CAMERA`] (depth, mm), and a 5x5 grid of model points 0.1 m apart at depth
+    /// `z` with normals toward the camera.
+    fn wall_and_grid(z: f32) -> ([u16; 64 * 48], [Point3; 25], [Vector3; 25]) {
+        let mut points = [Point3::origin(); 25];
+        for (i, p) in points.iter_mut().enumerate() {
+            *p = Point3::new(-0.2 + 0.1 * (i % 5) as f32, -0.2 + 0.1 * (i / 5) as f32, z);
+        }
+        ([1000u16; 64 * 48], points, [Vector3::new(0.0, 0.0, -1.0); 25])
+    }
+
     #[test]
     fn a_prior_row_moves_the_pose_where_the_pairs_leave_it_free() {
         // A flat wall 1 m in front of a small camera: the pairs fix depth, pitch and roll, and leave the slide
         // across the wall free; a row asking for x 1 cm lower takes the step there and changes nothing else.
         let k = SMALL_CAMERA;
-        let depth = [1000u16; 64 * 48];
+        let (depth, points, normals) = wall_and_grid(1.0);
         let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
-        let mut points = [Point3::origin(); 25];
-        for (i, p) in points.iter_mut().enumerate() {
-            *p = Point3::new(-0.2 + 0.1 * (i % 5) as f32, -0.2 + 0.1 * (i / 5) as f32, 1.0);
-        }
-        let normals = [Vector3::new(0.0, 0.0, -1.0); 25];
         let below = Plane::through(Vector3::new(0.0, 0.0, 3.0), Vector3::new(0.0, 0.0, -1.0));
         let params = IcpParams::new(below);
         let row = PriorRow {
@@ -482,13 +487,8 @@ mod tests {
         // A flat front 1 m from the camera, 20 cm above a bed whose surface is z = 1.2 (normal toward the camera),
         // and a model sunk 6 cm behind it: past the 4 cm occluder margin.
         let k = SMALL_CAMERA;
-        let depth = [1000u16; 64 * 48];
+        let (depth, points, normals) = wall_and_grid(1.06);
         let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
-        let mut points = [Point3::origin(); 25];
-        for (i, p) in points.iter_mut().enumerate() {
-            *p = Point3::new(-0.2 + 0.1 * (i % 5) as f32, -0.2 + 0.1 * (i / 5) as f32, 1.06);
-        }
-        let normals = [Vector3::new(0.0, 0.0, -1.0); 25];
         let bed = Plane::through(Vector3::new(0.0, 0.0, 1.2), Vector3::new(0.0, 0.0, -1.0));
         let step = |h: f32| {
             let params = IcpParams {
