@@ -6,8 +6,8 @@
 //! one), within `max_distance_m` (the paper's 0.1 m), and not in front of the model point by more than
 //! `occluder_margin_m`: points in front of the model surface belong to whatever occludes the body (the robot arm, a
 //! raised hand) and are counted, not fitted, unless they lie lower over the bed than a lying patient's front reaches
-//! (`body_max_height_m`): those are the patient, in front of a model that has sunk behind them. The observed normal comes from the depth neighbours `normal_step_px`
-//! away.
+//! (`body_max_height_m`): those are the patient, in front of a model that has sunk behind them. The observed normal
+//! comes from the depth neighbours `normal_step_px` away.
 //!
 //! Cost: per model point one projection, three unprojections and a 6x6 outer product (~80 flops): 1.2 k torso
 //! points take about 20 µs per step on one desktop core; nothing allocates. A frame that carries a normal memo

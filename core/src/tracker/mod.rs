@@ -8,9 +8,9 @@
 //! Per frame after init: the forest's six points (with a Gaussian prior around the last refined points in the
 //! feedback variant, paper Sect. 3.4) give the torso frame; rigid point-to-plane ICP of the torso model refines it
 //! ([`torso_icp`]: robust, occluder-aware, with what lies low over the bed taken as the patient rather than the arm,
-//! a fixed iteration count cut by the [`budget`]); the refined pose and
-//! points feed the next frame's prior; probe mapping ([`crate::probe`]) maps the newest arm state onto the surface;
-//! the [`state`] machine decides what the health message says; packets are stamped with the frame's capture time.
+//! a fixed iteration count cut by the [`budget`]); the refined pose and points feed the next frame's prior; probe
+//! mapping ([`crate::probe`]) maps the newest arm state onto the surface; the [`state`] machine decides what the
+//! health message says; packets are stamped with the frame's capture time.
 //!
 //! A fit is good when its residual is small, most pairs lie within the shape's mismatch and the camera does not
 //! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) the fit starts

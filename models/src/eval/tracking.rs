@@ -168,18 +168,20 @@ fn parse_weight(s: &str) -> std::result::Result<f32, String> {
     }
 }
 
-fn parse_visible_share(s: &str) -> std::result::Result<f32, String> {
+/// `s` as a number from 0 to 1, or an error naming `what` it should have been.
+fn parse_unit(s: &str, what: &str) -> std::result::Result<f32, String> {
     match s.parse::<f32>() {
         Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
-        _ => Err(format!("`{s}` is not a share of the torso (0 to 1)")),
+        _ => Err(format!("`{s}` is not {what} (0 to 1)")),
     }
 }
 
+fn parse_visible_share(s: &str) -> std::result::Result<f32, String> {
+    parse_unit(s, "a share of the torso")
+}
+
 fn parse_body_height(s: &str) -> std::result::Result<f32, String> {
-    match s.parse::<f32>() {
-        Ok(v) if (0.0..=1.0).contains(&v) => Ok(v),
-        _ => Err(format!("`{s}` is not a height above the bed in metres (0 to 1)")),
-    }
+    parse_unit(s, "a height above the bed in metres")
 }
 
 /// A 4x4 row-major rigid transform as an isometry.
