@@ -441,11 +441,31 @@ mod tests {
         ([1000u16; 64 * 48], points, [Vector3::new(0.0, 0.0, -1.0); 25])
     }
 
+    /// One unweighted (no Huber) step of every point with its normal from the identity pose, [`SMALL_CAMERA`].
+    fn step_from_identity(
+        frame: &DepthFrame<'_>,
+        points: &[Point3],
+        normals: &[Vector3],
+        params: &IcpParams,
+        rows: &[PriorRow],
+    ) -> Result<(Isometry3, Association), IcpError> {
+        robust_point_to_plane_step(
+            frame,
+            &SMALL_CAMERA,
+            points,
+            Some(normals),
+            1,
+            &Isometry3::identity(),
+            params,
+            f32::INFINITY,
+            rows,
+        )
+    }
+
     #[test]
     fn a_prior_row_moves_the_pose_where_the_pairs_leave_it_free() {
         // A flat wall 1 m in front of a small camera: the pairs fix depth, pitch and roll, and leave the slide
         // across the wall free; a row asking for x 1 cm lower takes the step there and changes nothing else.
-        let k = SMALL_CAMERA;
         let (depth, points, normals) = wall_and_grid(1.0);
         let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
         let below = Plane::through(Vector3::new(0.0, 0.0, 3.0), Vector3::new(0.0, 0.0, -1.0));
@@ -456,18 +476,7 @@ mod tests {
             w: 1.0,
         };
         let step = |rows: &[PriorRow]| {
-            let (pose, a) = robust_point_to_plane_step(
-                &frame,
-                &k,
-                &points,
-                Some(&normals[..]),
-                1,
-                &Isometry3::identity(),
-                &params,
-                f32::INFINITY,
-                rows,
-            )
-            .unwrap();
+            let (pose, a) = step_from_identity(&frame, &points, &normals, &params, rows).unwrap();
             assert_eq!(a.pairs, 25);
             pose
         };
@@ -495,17 +504,7 @@ mod tests {
                 body_max_height_m: h,
                 ..IcpParams::new(bed)
             };
-            robust_point_to_plane_step(
-                &frame,
-                &k,
-                &points,
-                Some(&normals[..]),
-                1,
-                &Isometry3::identity(),
-                &params,
-                f32::INFINITY,
-                &[],
-            )
+            step_from_identity(&frame, &points, &normals, &params, &[])
         };
         // Off, or a limit below the front's height: the front is an occluder, nothing pairs.
         for h in [0.0, 0.18] {

@@ -137,9 +137,10 @@ pub struct TrackingEvalArgs {
     /// most 64).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=MAX_SHAPE_FRAMES as i64))]
     pub shape_frames: Option<u16>,
-    /// The tracker's `shape_combine`: how the init frames' shape estimates are combined (default: the tracker's).
-    #[arg(long, value_parser = ["mean", "median"])]
-    pub shape_combine: Option<String>,
+    /// The tracker's `shape_combine`: how the init frames' shape estimates are combined, `mean` or `median`
+    /// (default: the tracker's).
+    #[arg(long, value_parser = parse_shape_combine)]
+    pub shape_combine: Option<ShapeCombine>,
     /// The tracker's `icp.acquire_min_visible`: the share of the torso model a fit made without a pose must see
     /// (default: the tracker's).
     #[arg(long, value_parser = parse_visible_share)]
@@ -182,6 +183,16 @@ fn parse_visible_share(s: &str) -> std::result::Result<f32, String> {
 
 fn parse_body_height(s: &str) -> std::result::Result<f32, String> {
     parse_unit(s, "a height above the bed in metres")
+}
+
+fn parse_shape_combine(s: &str) -> std::result::Result<ShapeCombine, String> {
+    match s {
+        "mean" => Ok(ShapeCombine::Mean),
+        "median" => Ok(ShapeCombine::Median),
+        _ => Err(format!(
+            "`{s}` is not a combination of shape estimates (mean or median)"
+        )),
+    }
 }
 
 /// A 4x4 row-major rigid transform as an isometry.
@@ -363,10 +374,8 @@ pub fn run_variant(
     if let Some(n) = args.shape_frames {
         cfg.shape_frames = n;
     }
-    match args.shape_combine.as_deref() {
-        Some("mean") => cfg.shape_combine = ShapeCombine::Mean,
-        Some("median") => cfg.shape_combine = ShapeCombine::Median,
-        _ => {}
+    if let Some(c) = args.shape_combine {
+        cfg.shape_combine = c;
     }
     if let Some(l) = args.refit_lambda {
         cfg.refit_lambda = l;
