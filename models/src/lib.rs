@@ -11,6 +11,7 @@ pub mod eval;
 pub mod forest;
 pub mod noise_report;
 pub mod pose;
+pub mod provenance;
 pub mod render;
 pub mod scene;
 pub mod sequence;

@@ -8,6 +8,7 @@
 //! second pass's poses agree loosely, up to three more (`calib_host::settle_passes`, as `supine calibrate` does).
 //! Cost: one .oni decode and one tip detection per frame and pass (~5 ms a frame).
 
+use crate::provenance::commit;
 use anyhow::{Context, Result, bail};
 use nalgebra::Point3;
 use std::path::{Path, PathBuf};
@@ -596,15 +597,4 @@ fn run_inner(args: &CalibrationEvalArgs) -> Result<()> {
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
-}
-
-/// The commit of the working tree, if git knows it.
-fn commit() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["rev-parse", "--short", "HEAD"])
-        .output()
-        .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_owned())
 }

@@ -757,7 +757,7 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         report.insert(variant.name().to_string(), combine(acc));
     }
     report.insert("sequences".into(), json!(sequences));
-    report.insert("commit".into(), json!(crate::shape::eval::commit()));
+    report.insert("commit".into(), json!(crate::provenance::commit()));
     let report = Value::Object(report);
     for (variant, _) in &per_variant {
         let r = &report[variant.name()];

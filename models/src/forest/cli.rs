@@ -8,6 +8,7 @@ use super::sidecar::FloatLeaves;
 use super::train::{TrainConfig, train_on};
 use super::tree::TreeParams;
 use crate::dataset::Dataset;
+use crate::provenance::commit;
 use anyhow::{Context, Result, ensure};
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
@@ -291,28 +292,6 @@ pub fn peak_rss_mib() -> Option<f64> {
     let line = s.lines().find(|l| l.starts_with("VmHWM:"))?;
     let kb: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
     Some(kb / 1024.0)
-}
-
-/// The checkout's commit (short hash, `+dirty` when the tree has changes), or "unknown".
-pub fn commit() -> String {
-    let dir = env!("CARGO_MANIFEST_DIR");
-    let run = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .current_dir(dir)
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match run(&["rev-parse", "--short=12", "HEAD"]) {
-        Some(h) => {
-            let dirty =
-                run(&["status", "--porcelain", "--untracked-files=no"]).is_some_and(|s| !s.is_empty());
-            if dirty { format!("{h}+dirty") } else { h }
-        }
-        None => "unknown".into(),
-    }
 }
 
 fn pool(threads: Option<usize>) -> Result<rayon::ThreadPool> {

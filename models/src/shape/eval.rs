@@ -6,6 +6,7 @@
 //!
 //! Cost per frame: subspace ~3 ms, combined fit ~10 ms, plain fit 5 starts, plus four posings (LBS) for the errors.
 
+use crate::provenance::commit;
 use anyhow::{Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use nalgebra::{Point3, Vector3};
@@ -554,24 +555,4 @@ pub fn evaluate(
         );
     }
     Ok(report)
-}
-
-/// The workspace's commit (short hash, `-dirty` when the tree has changes), or "unknown".
-pub fn commit() -> String {
-    let run = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .current_dir(env!("CARGO_MANIFEST_DIR"))
-            .output()
-            .ok()
-            .filter(|o| o.status.success())
-            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
-    };
-    match run(&["rev-parse", "--short", "HEAD"]) {
-        Some(h) => match run(&["status", "--porcelain", "--untracked-files=no"]) {
-            Some(s) if !s.is_empty() => format!("{h}-dirty"),
-            _ => h,
-        },
-        None => "unknown".into(),
-    }
 }
