@@ -6,8 +6,9 @@
 //! refines the best ones fully. The same constraint judges fits ([`along_the_bed`]): on a raised head section, whose
 //! slope gives the bed's axis exactly, a torso points up it.
 //!
-//! Cost per acquiring frame: [`STARTS`] screening fits of [`SCREEN_ITERATIONS`] ICP iterations (about 1-2 ms with
-//! the default model); nothing while tracking; nothing allocates.
+//! Cost per acquiring frame: [`STARTS`] screening fits of [`SCREEN_ITERATIONS`] ICP iterations on every fourth torso
+//! vertex (the tracker's `screen_stride`; about 0.5-1 ms with the default model); nothing while tracking; nothing
+//! allocates.
 
 use crate::geometry::{Isometry3, Matrix3, Plane, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use crate::planes::BedScene;

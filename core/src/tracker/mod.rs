@@ -35,7 +35,7 @@
 //! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
 //! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
 //! (20-40 µs each), probe mapping (tens of µs) and five packets; an acquiring frame adds the bed search's screening
-//! (1-2 ms).
+//! (0.5-1 ms) and up to six full fits.
 
 pub mod accuracy;
 pub mod bed_search;
@@ -205,6 +205,15 @@ pub struct TrackerConfig {
     /// with the torso error 10.49 -> 10.41 mm and the probe error 10.71 -> 10.72 mm; 3 gave 3.91 ms, 10.55 mm and
     /// 10.78 mm (docs/tracking.md, "Lock refits on every second vertex").
     pub refit_stride: u16,
+    /// The screening of the bed grid's starts ([`bed_search`], in acquisitions and the init phase's shape fit)
+    /// uses every `screen_stride`-th torso vertex (1: all); the starts it keeps are refined on every vertex. 4 since
+    /// 2026-12-05: the screening was most of an acquisition frame's ICP time, and acquisitions were most of the
+    /// frames over 4 ms. On the 146 validation sequences 1 / 2 / 4 / 8 gave a torso error of 10.63 / 10.67 / 10.52 /
+    /// 10.36 mm, a probe error of 10.37 / 10.65 / 10.04 / 10.07 mm and recovery within 5 frames on 124 / 123 / 123
+    /// / 123; on 34001-34100 1 / 4 / 8 gave 11.86 / 12.15 / 13.08 mm (probe 11.22 / 11.27 / 11.87 mm). At 4 the frame
+    /// p99 fell 5.49 -> 4.24 ms on validation (acquisition frames' median 3.91 -> 2.77 ms; docs/tracking.md,
+    /// nineteenth round).
+    pub screen_stride: u16,
     /// [`TorsoIcpConfig::hold_rotation_weight`] of the fit from the temporal start while occluded (0: off): the
     /// last pose's rotation is held where the little the frame shows of the torso does not fix it, so that a
     /// followed pose ([`TorsoIcpConfig::follow_occluded`]) does not turn away a few degrees a frame. 0.3: on the 46
@@ -272,6 +281,7 @@ impl Default for TrackerConfig {
             refit_bed_contact: None,
             refit_lambda: 0.01,
             refit_stride: 2,
+            screen_stride: 4,
             occluded_hold_rotation: 0.3,
             surface: SurfaceConfig::default(),
             planes: PlaneConfig::default(),
@@ -1213,9 +1223,17 @@ impl<'m, 's> Tracker<'m, 's> {
         for start in starts {
             let min_iterations = self.cfg.icp.acquire_min_iterations;
             let budget = self.cfg.budget;
-            let Some((pose, support)) =
-                self.fit_lying(frame, bed, start, &params, &budget, min_iterations, clock, watch)
-            else {
+            let Some((pose, support)) = self.fit_lying(
+                frame,
+                bed,
+                start,
+                &self.cfg.icp,
+                &params,
+                &budget,
+                min_iterations,
+                clock,
+                watch,
+            ) else {
                 continue;
             };
             if best.is_none_or(|(s, _)| support > s) {
@@ -1487,6 +1505,10 @@ impl<'m, 's> Tracker<'m, 's> {
             icp_iterations: bed_search::SCREEN_ITERATIONS,
             ..self.cfg.budget
         };
+        let cfg = TorsoIcpConfig {
+            stride: self.cfg.screen_stride.max(1),
+            ..self.cfg.icp
+        };
         let back = bed_search::back_depth_m(self.scratch.torso_vertices);
         let mut kept: [(f32, Isometry3); bed_search::KEEP] = [(0.0, Isometry3::identity()); bed_search::KEEP];
         for start in bed_search::grid_starts(forest, bed, back) {
@@ -1499,7 +1521,7 @@ impl<'m, 's> Tracker<'m, 's> {
             }
             let iterations = bed_search::SCREEN_ITERATIONS;
             let Some((pose, score)) =
-                self.fit_lying(frame, bed, start, params, &screen, iterations, clock, watch)
+                self.fit_lying(frame, bed, start, &cfg, params, &screen, iterations, clock, watch)
             else {
                 continue;
             };
@@ -1518,6 +1540,7 @@ impl<'m, 's> Tracker<'m, 's> {
         frame: &DepthFrame<'_>,
         bed: &BedScene,
         start: Isometry3,
+        cfg: &TorsoIcpConfig,
         params: &icp::IcpParams,
         budget: &BudgetConfig,
         min_iterations: u8,
@@ -1530,15 +1553,16 @@ impl<'m, 's> Tracker<'m, 's> {
             self.scratch.torso_vertices,
             self.scratch.torso_normals,
             start,
-            &self.cfg.icp,
+            cfg,
             params,
             budget,
             min_iterations,
             clock,
             watch,
         );
-        (fit.association.pairs >= self.cfg.icp.min_pairs as usize && lies_on_bed(&pose, bed))
-            .then(|| (pose, fit.support()))
+        // Pairs counted on every `stride`-th vertex stand for `stride` times as many.
+        let pairs = fit.association.pairs * cfg.stride.max(1) as usize;
+        (pairs >= self.cfg.icp.min_pairs as usize && lies_on_bed(&pose, bed)).then(|| (pose, fit.support()))
     }
 
     /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once

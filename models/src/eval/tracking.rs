@@ -105,6 +105,10 @@ pub struct TrackingEvalArgs {
     /// tracker's).
     #[arg(long)]
     pub refit_stride: Option<u16>,
+    /// The tracker's `screen_stride`: the acquisition's screening of the bed grid's starts uses every N-th torso
+    /// vertex (default: the tracker's).
+    #[arg(long)]
+    pub screen_stride: Option<u16>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
     /// in fits from every start but the temporal one.
     #[arg(long, value_parser = parse_weight)]
@@ -386,6 +390,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.refit_stride {
         cfg.refit_stride = n;
+    }
+    if let Some(n) = args.screen_stride {
+        cfg.screen_stride = n;
     }
     if let Some(v) = args.refit_min_visible {
         cfg.refit_min_visible = v;
