@@ -105,8 +105,9 @@ pub struct TrackingEvalArgs {
     /// tracker's).
     #[arg(long)]
     pub refit_stride: Option<u16>,
-    /// The tracker's `screen_stride`: the acquisition's screening of the bed grid's starts uses every N-th torso
-    /// vertex (default: the tracker's).
+    /// The tracker's `screen_stride`: the screening of the bed grid's starts (acquisitions, the init phase's shape
+    /// fit) uses every N-th torso vertex (default: the tracker's, 4; 1 gives the tracker before 2026-12-05's
+    /// nineteenth round).
     #[arg(long)]
     pub screen_stride: Option<u16>,
     /// The tracker's `bed_pitch_weight` (default: the tracker's, 0: off; 3 was measured): the back-on-the-bed prior
