@@ -88,7 +88,9 @@ pub struct Models {
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct Budget {
-    /// Budget per frame, ms (the Kinect v1 delivers a frame every 33.3 ms).
+    /// Budget per frame, ms (the Kinect v1 delivers a frame every 33.3 ms). The default, 30, is the tracker's own
+    /// default (33 ms, what `eval tracking` and the budget name) less about 3 ms for what the service does
+    /// around it on the same core: the driver's decode, the link's writes, the recorder.
     pub frame_ms: Spanned<f64>,
     /// ICP iterations per frame when the budget allows.
     pub icp_iterations: Spanned<u32>,
