@@ -100,6 +100,15 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
     }
     assert!(ms(one, "/stage_ms_p50/forest") > 0.0);
     assert!(ms(one, "/stage_ms_p50/icp") > 0.0);
+    // Pooled over one sequence's frames, the percentiles are the sequence's own.
+    for q in ["p50", "p99"] {
+        let pooled = ms(summary, &format!("/latency_ms_{q}_pooled"));
+        assert_eq!(pooled, ms(one, &format!("/latency_ms_{q}")), "{q}");
+    }
+    // The demo has one full occlusion; the count of recoveries within the target follows its recovery.
+    assert_eq!(summary["full_occlusions"], 1);
+    let recovered = u64::from(ms(one, "/recovery_frames") <= 5.0);
+    assert_eq!(summary["recovered_within_target"].as_u64(), Some(recovered));
 }
 
 #[test]
