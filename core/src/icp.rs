@@ -153,9 +153,15 @@ impl core::error::Error for IcpError {}
 
 fn observed(frame: &DepthFrame<'_>, k: &Intrinsics, u: i32, v: i32) -> Option<Point3> {
     match frame.at(u, v) {
-        Some(d) if d != 0 => Some(k.unproject(u as f32, v as f32, d as f32 * 0.001)),
+        Some(d) if d != 0 => Some(point_at(k, u, v, d)),
         _ => None,
     }
+}
+
+/// The camera-frame point of pixel (`u`, `v`) at depth `d_mm`.
+#[inline(always)]
+fn point_at(k: &Intrinsics, u: i32, v: i32, d_mm: u16) -> Point3 {
+    k.unproject(u as f32, v as f32, d_mm as f32 * 0.001)
 }
 
 /// What the observed surface offers a model point: its partner, or why it has none (the counts of
@@ -185,7 +191,7 @@ fn pairing(frame: &DepthFrame<'_>, k: &Intrinsics, p_cam: &Point3, params: &IcpP
     let o = match frame.at(u, v) {
         None => return Pairing::Other,
         Some(0) => return Pairing::NoDepth,
-        Some(d) => k.unproject(u as f32, v as f32, d as f32 * 0.001),
+        Some(d) => point_at(k, u, v, d),
     };
     if o.z < p_cam.z - params.occluder_margin_m && params.occludes(&o) {
         return Pairing::Occluded;
@@ -491,13 +497,11 @@ mod tests {
         let (depth, points, normals) = wall_and_grid(1.06);
         let frame = DepthFrame::new(&depth, 64, 48, crate::time::Timestamp::default(), 0).unwrap();
         let bed = Plane::through(Vector3::new(0.0, 0.0, 1.2), Vector3::new(0.0, 0.0, -1.0));
-        let step = |h: f32| {
-            let params = IcpParams {
-                body_max_height_m: h,
-                ..IcpParams::new(bed)
-            };
-            step_from_identity(&frame, &points, &normals, &params, &[])
+        let params = |h: f32| IcpParams {
+            body_max_height_m: h,
+            ..IcpParams::new(bed)
         };
+        let step = |h: f32| step_from_identity(&frame, &points, &normals, &params(h), &[]);
         // Off, or a limit below the front's height: the front is an occluder, nothing pairs.
         for h in [0.0, 0.18] {
             let a = associate(
@@ -507,10 +511,7 @@ mod tests {
                 Some(&normals[..]),
                 1,
                 &Isometry3::identity(),
-                &IcpParams {
-                    body_max_height_m: h,
-                    ..IcpParams::new(bed)
-                },
+                &params(h),
                 |_, _, _, _| {},
             );
             assert_eq!((a.pairs, a.occluded), (0, 25), "limit {h}");

@@ -1560,9 +1560,8 @@ impl<'m, 's> Tracker<'m, 's> {
             clock,
             watch,
         );
-        // Pairs counted on every `stride`-th vertex stand for `stride` times as many.
-        let pairs = fit.association.pairs * cfg.stride.max(1) as usize;
-        (pairs >= self.cfg.icp.min_pairs as usize && lies_on_bed(&pose, bed)).then(|| (pose, fit.support()))
+        let pairs = cfg.model_points(fit.association.pairs);
+        (pairs >= cfg.min_pairs as usize && lies_on_bed(&pose, bed)).then(|| (pose, fit.support()))
     }
 
     /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once

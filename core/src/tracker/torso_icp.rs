@@ -116,6 +116,14 @@ pub struct TorsoIcpConfig {
     pub hold_rotation_weight: f32,
 }
 
+impl TorsoIcpConfig {
+    /// A count of the fit's association (made on every `stride`-th vertex) in model points: what the pair floors
+    /// are stated in.
+    pub fn model_points(&self, counted: usize) -> usize {
+        counted * self.stride.max(1) as usize
+    }
+}
+
 /// Lever of [`TorsoIcpConfig::hold_rotation_weight`]'s rows, metres: about half the torso's width.
 pub const HOLD_LEVER_M: f32 = 0.1;
 
@@ -208,14 +216,14 @@ impl TorsoFit {
         } else {
             (cfg.min_pairs, cfg.min_visible)
         };
-        if a.pairs >= min_pairs as usize
+        if cfg.model_points(a.pairs) >= min_pairs as usize
             && a.rms_m() <= cfg.max_rms_m
             && self.support() >= min_support
             && self.visible >= min_visible
         {
             FitQuality::Good
         } else if self.visible < cfg.occluded_below
-            && a.pairs + a.occluded + a.no_depth >= cfg.min_pairs as usize
+            && cfg.model_points(a.pairs + a.occluded + a.no_depth) >= cfg.min_pairs as usize
         {
             // Too little seen, or a fit spoiled while a good part of the torso is hidden (the arm coming or going):
             // occlusion, not a lost patient.

@@ -545,10 +545,7 @@ pub fn run_variant(
             score_against_truth(tt, &surfaces[d.surface], d, &mut scores[d.index])?;
         }
     }
-    let after_init: Vec<&FrameScore> = scores
-        .iter()
-        .skip(init_frames.unwrap_or(scores.len() as u32) as usize)
-        .collect();
+    let after_init = frames_after_init(&scores, init_frames);
     let tracked = after_init.iter().filter(|s| s.torso_mm.is_some()).count();
     let mut states = serde_json::Map::new();
     for s in &scores {
@@ -602,6 +599,12 @@ pub fn run_variant(
             .map(|h| h.normal().angle(&b.mattress.normal()).to_degrees())),
     });
     Ok((scores, summary))
+}
+
+/// The frames after the init phase (`init_frames` long; none when it never ended): what the sequence's figures
+/// count.
+fn frames_after_init(scores: &[FrameScore], init_frames: Option<u32>) -> &[FrameScore] {
+    &scores[init_frames.map_or(scores.len(), |n| (n as usize).min(scores.len()))..]
 }
 
 /// A tracked frame waiting for [`score_against_truth`]: where its score is, and what the tracker reported.
@@ -815,10 +818,8 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
             let mut with_frames = summary.clone();
             with_frames["per_frame"] = json!(scores);
             per_seq.insert(variant.name().to_string(), with_frames);
-            let init = summary["init_frames"]
-                .as_u64()
-                .map_or(scores.len(), |n| n as usize);
-            frame_ms.extend(scores.iter().skip(init).map(|s| s.ms));
+            let init_frames = summary["init_frames"].as_u64().map(|n| n as u32);
+            frame_ms.extend(frames_after_init(&scores, init_frames).iter().map(|s| s.ms));
             acc.push(summary);
             plots.push((*variant, scores));
         }
