@@ -12,14 +12,14 @@
 //! spans the bed, rises from the mattress at a hinge, ends below the volume's top and is one flat surface (its points'
 //! local normals along its own); the clip keeps only what lies above it as well, and the bed's long axis runs up its
 //! slope. A patient on a raised section can hide the whole mattress: then a bed-wide tilted plane larger than the
-//! chosen mattress whose bottom lies well below it (an arm link's or the legs' flat top was chosen) or a bed's height
-//! above it (the floor was) places the mattress level through that bottom; a level plane 8-35 cm under that bottom
-//! whose points lie under the section is the bed's base bared by it, never the mattress (the mattress then goes a
-//! nominal thickness above it), and a level-looking plane more than 2.5° off that base is not the mattress either. A
-//! section's bottom leaves out the strip of the floor its plane crosses (5 cm each side: a far floor comes in depth
-//! layers) and, when no floor was found, its points below an empty 0.3 m of height. Up is the caller's (from
-//! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
-//! steeply raised head section in a close view can defeat.
+//! chosen mattress whose bottom lies well below it (an arm link's or the legs' flat top was chosen) or, with no floor
+//! found under the chosen plane, a bed's height above it (the floor was) places the mattress level through that
+//! bottom; a level plane 8-35 cm under that bottom whose points lie under the section is the bed's base bared by it,
+//! never the mattress (the mattress then goes a nominal thickness above it), and a level-looking plane more than
+//! 2.5° off that base is not the mattress either. A section's bottom leaves out the strip of the floor its plane
+//! crosses (5 cm each side: a far floor comes in depth layers) and, when no floor was found, its points below an
+//! empty 0.3 m of height. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without either,
+//! the largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once). Telling
@@ -420,10 +420,13 @@ pub fn estimate_bed(
     let (mattress, mattress_n) = match (chosen, bottom) {
         (Some((m, n)), Some(b)) => {
             let below = b.height_above(&m, points, labels);
-            // Above the section's bottom: an arm link's or the legs' flat top. A bed's height below it: the floor.
+            // Above the section's bottom: an arm link's or the legs' flat top. A bed's height below it: the floor,
+            // unless the floor was found under the chosen plane (then a steep section's lower part is hidden: the
+            // patient and the arm hid all of a 41° section's lowest 0.43 m in s29002, and the mattress went there).
             // Only a section larger than the chosen plane tells: the arm's links line up into tilted planes too,
             // reaching from beside the bed's base to high above the mattress, but smaller than a visible mattress.
-            if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || below > FLOOR_TO_MATTRESS_M.0) {
+            let floor_below = floor.is_none() && below > FLOOR_TO_MATTRESS_M.0;
+            if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || floor_below) {
                 (section_level(&b), 0)
             } else {
                 (m, n)
@@ -1447,6 +1450,13 @@ mod tests {
     /// arm's link a 0.4 x 0.4 m plate 0.45 m above the mattress, the floor around the bed; the camera and the true
     /// section.
     fn hidden_mattress_scene() -> (vec::Vec<u16>, Isometry3, Plane) {
+        section_scene(None)
+    }
+
+    /// [`hidden_mattress_scene`], or with `Some(from)` the flat mattress in view beside the legs and the section only
+    /// from `from` metres up its slope (the patient and the arm hide its lower part; nothing hides the mattress there,
+    /// so rays meet it), 1.2 m long.
+    fn section_scene(section_from_m: Option<f32>) -> (vec::Vec<u16>, Isometry3, Plane) {
         let k = Intrinsics::KINECT_V1;
         // From beyond the foot end, looking at the section.
         let eye = Vector3::new(0.1, -1.5, 1.3);
@@ -1471,9 +1481,16 @@ mod tests {
                 hit(Vector3::z(), -0.22, &|p| {
                     p.x.abs() < 0.18 && (-0.7..-0.05).contains(&p.y)
                 });
+                let (from, to) = section_from_m.map_or((0.0, 0.8), |from| (from, 1.2));
                 hit(section_n, 0.0, &|p| {
-                    p.x.abs() < 0.45 && p.y >= 0.0 && p.y / libm::cosf(raise) < 0.8
+                    let up_slope = p.y / libm::cosf(raise);
+                    p.x.abs() < 0.45 && p.y >= 0.0 && (from..to).contains(&up_slope)
                 });
+                if section_from_m.is_some() {
+                    hit(Vector3::z(), 0.0, &|p| {
+                        p.x.abs() < 0.45 && (-1.0..0.0).contains(&p.y)
+                    });
+                }
                 hit(Vector3::z(), -0.45, &|p| {
                     (0.3..0.7).contains(&p.x) && p.y.abs() < 0.2
                 });
@@ -1510,6 +1527,27 @@ mod tests {
         let along = camera_from_world.inverse().rotation
             * (bed.volume.bed_from_camera.inverse().rotation * Vector3::y());
         assert!(along.y > 0.99, "long axis {along:?}");
+    }
+
+    #[test]
+    fn a_steep_sections_hidden_lower_part_does_not_lift_the_mattress_found_over_the_floor() {
+        // s29002: a 41-42° section seen only from 0.43 m above the mattress (the patient and the arm hide the rest),
+        // larger than the flat mattress's visible strips, which lie a bed's height over the floor as they should.
+        let from = 0.65;
+        let (depth, camera_from_world, _) = section_scene(Some(from));
+        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
+        let k = Intrinsics::KINECT_V1;
+        let up = camera_from_world.rotation * Vector3::z();
+        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
+        assert!(bed.floor.is_some(), "the floor is in view");
+        assert!(
+            bed.mattress.normal().dot(&mattress.normal()) > libm::cosf(0.5f32.to_radians())
+                && (bed.mattress.d - mattress.d).abs() < 0.02,
+            "mattress {:?} vs {mattress:?}",
+            bed.mattress
+        );
     }
 
     #[test]
