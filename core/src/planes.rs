@@ -1210,6 +1210,33 @@ mod tests {
         (vec![Point3::origin(); n], vec![0u8; n])
     }
 
+    /// The bed search on a frame of `depth`, up being the world's z.
+    fn bed_seen_from(depth: &[u16], camera_from_world: &Isometry3) -> BedScene {
+        let frame = DepthFrame::new(depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
+        let (mut pts, mut lab) = scratch();
+        let up = camera_from_world.rotation * Vector3::z();
+        estimate_bed(
+            &frame,
+            &Intrinsics::KINECT_V1,
+            &PlaneConfig::default(),
+            Some(&up),
+            &mut pts,
+            &mut lab,
+        )
+        .unwrap()
+    }
+
+    /// The found mattress is the world's z = 0 plane within 0.5° and 2 cm.
+    fn assert_mattress_at_world_zero(bed: &BedScene, camera_from_world: &Isometry3) {
+        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(camera_from_world);
+        assert!(
+            bed.mattress.normal().dot(&mattress.normal()) > libm::cosf(0.5f32.to_radians())
+                && (bed.mattress.d - mattress.d).abs() < 0.02,
+            "mattress {:?} vs {mattress:?}",
+            bed.mattress
+        );
+    }
+
     #[test]
     fn finds_mattress_floor_axis_and_clips_the_patient() {
         let (depth, camera_from_world, mattress, floor) = scene();
@@ -1303,12 +1330,8 @@ mod tests {
 
     /// The bed of [`bared_base_scene`]: its mattress is the true one, flat at z = 0, and its 35° section is found.
     fn assert_bared_base_bed(tilted: Option<f32>) {
-        let k = Intrinsics::KINECT_V1;
         let (camera_from_world, depth) = bared_base_scene(tilted);
-        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
-        let (mut pts, mut lab) = scratch();
-        let up = camera_from_world.rotation * Vector3::z();
-        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        let bed = bed_seen_from(&depth, &camera_from_world);
         let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
         assert!(
             (bed.mattress.d - mattress.d).abs() < 0.02
@@ -1508,19 +1531,9 @@ mod tests {
     #[test]
     fn a_hidden_mattress_is_placed_through_the_raised_sections_bottom() {
         let (depth, camera_from_world, section) = hidden_mattress_scene();
-        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
-        let (mut pts, mut lab) = scratch();
-        let k = Intrinsics::KINECT_V1;
-        let up = camera_from_world.rotation * Vector3::z();
-        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        let bed = bed_seen_from(&depth, &camera_from_world);
         // Not the legs' top (0.22 m), the arm's plate (0.45 m) or the floor: the level plane through the hinge.
-        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
-        assert!(
-            bed.mattress.normal().dot(&mattress.normal()) > libm::cosf(0.5f32.to_radians())
-                && (bed.mattress.d - mattress.d).abs() < 0.02,
-            "mattress {:?} vs {mattress:?}",
-            bed.mattress
-        );
+        assert_mattress_at_world_zero(&bed, &camera_from_world);
         let found = bed.head_section.expect("the raised section");
         assert!(found.normal().dot(&section.normal()) > libm::cosf(2f32.to_radians()));
         // Along the bed: up the section, world y.
@@ -1531,23 +1544,13 @@ mod tests {
 
     #[test]
     fn a_steep_sections_hidden_lower_part_does_not_lift_the_mattress_found_over_the_floor() {
-        // s29002: a 41-42° section seen only from 0.43 m above the mattress (the patient and the arm hide the rest),
-        // larger than the flat mattress's visible strips, which lie a bed's height over the floor as they should.
-        let from = 0.65;
-        let (depth, camera_from_world, _) = section_scene(Some(from));
-        let frame = DepthFrame::new(&depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
-        let (mut pts, mut lab) = scratch();
-        let k = Intrinsics::KINECT_V1;
-        let up = camera_from_world.rotation * Vector3::z();
-        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
-        let mattress = Plane::through(Vector3::zeros(), Vector3::z()).transformed(&camera_from_world);
+        // s29002's case: a 40° section seen only from 0.42 m above the mattress (the patient and the arm hide the
+        // rest), larger than the flat mattress's visible strips, which lie a bed's height over the floor as they
+        // should.
+        let (depth, camera_from_world, _) = section_scene(Some(0.65));
+        let bed = bed_seen_from(&depth, &camera_from_world);
         assert!(bed.floor.is_some(), "the floor is in view");
-        assert!(
-            bed.mattress.normal().dot(&mattress.normal()) > libm::cosf(0.5f32.to_radians())
-                && (bed.mattress.d - mattress.d).abs() < 0.02,
-            "mattress {:?} vs {mattress:?}",
-            bed.mattress
-        );
+        assert_mattress_at_world_zero(&bed, &camera_from_world);
     }
 
     #[test]
@@ -1608,11 +1611,7 @@ mod tests {
 
     /// The bed search on `depth` finds `mattress` (camera frame) and no floor.
     fn assert_mattress_without_floor(depth: &[u16], camera_from_world: &Isometry3, mattress: &Plane) {
-        let frame = DepthFrame::new(depth, WIDTH as u16, HEIGHT as u16, Timestamp::default(), 0).unwrap();
-        let (mut pts, mut lab) = scratch();
-        let k = Intrinsics::KINECT_V1;
-        let up = camera_from_world.rotation * Vector3::z();
-        let bed = estimate_bed(&frame, &k, &PlaneConfig::default(), Some(&up), &mut pts, &mut lab).unwrap();
+        let bed = bed_seen_from(depth, camera_from_world);
         assert!(
             (bed.mattress.d - mattress.d).abs() < 0.003,
             "mattress {:?} vs {mattress:?}",
