@@ -72,6 +72,13 @@ impl IcpParams {
         self.body_max_height_m <= 0.0 || self.above_bed(o).0 >= self.body_max_height_m
     }
 
+    /// Whether the camera sees the observed point `o` more than `occluder_margin_m` behind the model point `p`
+    /// (both camera frame): through the model, where there is no body.
+    #[inline(always)]
+    pub fn sees_through(&self, p: &Point3, o: &Point3) -> bool {
+        o.z > p.z + self.occluder_margin_m
+    }
+
     /// Height of `p` (camera frame) above the bed's surface, the higher of the mattress and the raised head section,
     /// and that surface's normal.
     pub fn above_bed(&self, p: &Point3) -> (f32, Vector3) {
@@ -198,7 +205,7 @@ fn pairing(frame: &DepthFrame<'_>, k: &Intrinsics, p_cam: &Point3, params: &IcpP
     }
     match partner_of(frame, k, p_cam, o, u, v, params) {
         Some(n) => Pairing::Pair(o, n),
-        None if o.z > p_cam.z + params.occluder_margin_m => Pairing::SeeThrough,
+        None if params.sees_through(p_cam, &o) => Pairing::SeeThrough,
         None => Pairing::Other,
     }
 }
@@ -292,7 +299,7 @@ pub fn associate<P: Copy + Into<Point3>, N: Copy + Into<Vector3>>(
                 a.pairs += 1;
                 a.sum_sq_m2 += r * r;
                 a.inliers += (r.abs() < INLIER_M) as usize;
-                a.see_through += (o.z > p.z + params.occluder_margin_m) as usize;
+                a.see_through += params.sees_through(&p, &o) as usize;
                 on_pair(i, &p, &o, &n);
             }
             Pairing::NoDepth => a.no_depth += 1,
