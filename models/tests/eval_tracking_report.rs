@@ -109,6 +109,11 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
     assert_eq!(summary["full_occlusions"], 1);
     let recovered = u64::from(ms(one, "/recovery_frames") <= 5.0);
     assert_eq!(summary["recovered_within_target"].as_u64(), Some(recovered));
+    // The demo's patient neither rolls nor shifts: no motion to follow, counted as none.
+    assert!(one["motion"].is_null());
+    for kind in ["roll", "shift"] {
+        assert_eq!(summary["motions_followed"][kind]["of"], 0, "{kind}");
+    }
 }
 
 #[test]

@@ -13,6 +13,8 @@
 //! - Sequences without `torso.bin` (the committed demo, older ones) are scored as `supine_core::tracker::accuracy`
 //!   does: vertex to vertex against the body model shaped with the true coefficients at the true torso pose.
 //! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm.
+//! - motion followed: the torso error's median over the [`MOTION_WINDOW`] frames after the patient's roll or shift
+//!   ends is at most [`MOTION_FOLLOWED_MM`] above its median over the frames before it began (a pose on both sides).
 //! - tracked fraction: frames after the init phase whose state carries a pose.
 //! - latency: per-frame processing time on this machine (one thread), p50 and p99. The frames are scored against
 //!   the full truth after the sequence (each tracked surface kept once), so the scoring's queries do not empty the
@@ -43,6 +45,7 @@ use supine_drivers::oni::OniReader;
 use supine_drivers::tracker_host::{ModelFiles, OwnedTorso, TrackerScratch};
 
 use super::tracking_truth::TrackingTruth;
+use crate::sequence::episodes::{Motion, MotionKind};
 use crate::sequence::{FrameTruth, SequenceMeta};
 
 /// Arguments of `supine-models eval tracking`.
@@ -566,6 +569,10 @@ pub fn run_variant(
         .as_ref()
         .and_then(|f| f.episodes().full_occlusion.as_ref().map(|o| o.end))
         .map(|end| recovery_frames(end, &scores));
+    let motion = full
+        .as_ref()
+        .and_then(|f| f.episodes().motion.as_ref())
+        .map(|m| motion_score(m, &scores));
     let c = tracker.counters();
     let summary = json!({
         "frames": scores.len(),
@@ -582,6 +589,7 @@ pub fn run_variant(
             s.probe_true_distance_mm.filter(|d| d.abs() <= CONTACT_MM).and(s.probe_mm)
         })),
         "recovery_frames": recovery,
+        "motion": motion,
         "states": states,
         "latency_ms_p50": percentile(&mut ms, 0.5),
         "latency_ms_p99": percentile(&mut ms, 0.99),
@@ -708,6 +716,57 @@ fn variants(names: &[String]) -> Result<Vec<Variant>> {
         .collect()
 }
 
+/// Frames before the patient's motion begins, and after it ends, whose torso errors [`motion_score`] compares (a
+/// third of a second at 30 Hz).
+pub const MOTION_WINDOW: u32 = 10;
+/// The tracker followed a motion when the torso error after it is at most this much above the error before it, mm.
+pub const MOTION_FOLLOWED_MM: f32 = 10.0;
+
+/// The torso error's median over the [`MOTION_WINDOW`] frames with a pose before motion `m` begins and after it
+/// ends, and whether the tracker followed it (null when it had no pose before: nothing to follow; false when it has
+/// none after).
+fn motion_score(m: &Motion, scores: &[FrameScore]) -> Value {
+    let median = |from: u32, to: u32| {
+        let mut v: Vec<f32> = scores
+            .iter()
+            .take(to as usize)
+            .skip(from as usize)
+            .filter_map(|s| s.torso_mm)
+            .collect();
+        percentile(&mut v, 0.5)
+    };
+    let before = median(m.start.saturating_sub(MOTION_WINDOW), m.start);
+    let after = median(m.end, m.end + MOTION_WINDOW);
+    let followed = before.map(|b| after.is_some_and(|a| a <= b + MOTION_FOLLOWED_MM));
+    json!({
+        "kind": m.kind,
+        "torso_mm_before": before,
+        "torso_mm_after": after,
+        "followed": followed,
+    })
+}
+
+/// Per motion kind, how many sequences' motions the tracker followed of those it had a pose before (`null`s left
+/// out): `{"roll": {"followed": n, "of": m}, "shift": ...}`.
+fn motions_followed(summaries: &[Value]) -> Value {
+    let mut out = serde_json::Map::new();
+    for kind in [MotionKind::Roll, MotionKind::Shift] {
+        let name = json!(kind);
+        let verdicts: Vec<bool> = summaries
+            .iter()
+            .filter(|s| s["motion"]["kind"] == name)
+            .filter_map(|s| s["motion"]["followed"].as_bool())
+            .collect();
+        if let Some(key) = name.as_str() {
+            out.insert(
+                key.to_string(),
+                json!({"followed": verdicts.iter().filter(|&&f| f).count(), "of": verdicts.len()}),
+            );
+        }
+    }
+    Value::Object(out)
+}
+
 /// The recovery target: tracked again within this many frames after the full occlusion.
 const RECOVERY_TARGET_FRAMES: u32 = 5;
 
@@ -757,6 +816,7 @@ fn combine(summaries: &[Value], frame_ms: &mut [f32]) -> Value {
         // How many of the sequences with a full occlusion met the recovery target, and how many had one.
         "recovered_within_target": recoveries.iter().filter(|&&r| r <= RECOVERY_TARGET_FRAMES as u64).count(),
         "full_occlusions": recoveries.len(),
+        "motions_followed": motions_followed(summaries),
         "states": states,
         "latency_ms_p50": num("latency_ms_p50"),
         "latency_ms_p99": max("latency_ms_p99"),
@@ -871,10 +931,84 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
             })
             .collect();
         println!("{:<20} stage ms p50 / p99: {}", "", stages.join(", "));
+        let m = &r["motions_followed"];
+        println!(
+            "{:<20} motion followed (torso error up by at most {} mm, medians of {} frames): roll {} of {}, shift {} of {}",
+            "",
+            MOTION_FOLLOWED_MM,
+            MOTION_WINDOW,
+            m["roll"]["followed"],
+            m["roll"]["of"],
+            m["shift"]["followed"],
+            m["shift"]["of"]
+        );
     }
     if let Some(path) = &args.json {
         std::fs::write(path, serde_json::to_vec_pretty(&report)?)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn with_errors(errors: &[Option<f32>]) -> Vec<FrameScore> {
+        errors
+            .iter()
+            .enumerate()
+            .map(|(i, e)| FrameScore {
+                frame: i as u32,
+                torso_mm: *e,
+                ..FrameScore::default()
+            })
+            .collect()
+    }
+
+    fn roll(start: u32, end: u32) -> Motion {
+        Motion {
+            kind: MotionKind::Roll,
+            start,
+            end,
+            roll_deg: 18.0,
+            shift_m: [0.0; 2],
+            pivot_bed: [0.0; 3],
+        }
+    }
+
+    #[test]
+    fn a_motion_is_followed_when_the_error_after_it_stays_within_the_margin_of_the_error_before() {
+        // 5 mm before frame 20; errors during the motion do not count; after frame 30: 12 mm (within 10 mm of 5),
+        // then 16 mm (not), then no pose at all.
+        let mut e = vec![Some(5.0); 20];
+        e.extend([Some(90.0); 10]);
+        let after = |x: Option<f32>| {
+            let mut v = e.clone();
+            v.extend([x; 10]);
+            motion_score(&roll(20, 30), &with_errors(&v))
+        };
+        let ok = after(Some(12.0));
+        assert_eq!(ok["kind"], "roll");
+        assert_eq!(ok["torso_mm_before"], 5.0);
+        assert_eq!(ok["torso_mm_after"], 12.0);
+        assert_eq!(ok["followed"], true);
+        assert_eq!(after(Some(16.0))["followed"], false);
+        let lost = after(None);
+        assert!(lost["torso_mm_after"].is_null());
+        assert_eq!(lost["followed"], false);
+        // Without a pose before the motion there is nothing to follow: left out of the counts.
+        let mut v = vec![None; 30];
+        v.extend([Some(5.0); 10]);
+        let untracked = motion_score(&roll(20, 30), &with_errors(&v));
+        assert!(untracked["followed"].is_null());
+        let summaries: Vec<Value> = [ok, after(Some(16.0)), untracked]
+            .into_iter()
+            .map(|m| json!({ "motion": m }))
+            .chain([json!({ "motion": null })])
+            .collect();
+        let counts = motions_followed(&summaries);
+        assert_eq!(counts["roll"], json!({"followed": 1, "of": 2}));
+        assert_eq!(counts["shift"], json!({"followed": 0, "of": 0}));
+    }
 }
