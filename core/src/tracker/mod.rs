@@ -1375,7 +1375,7 @@ impl<'m, 's> Tracker<'m, 's> {
                     // minimum (the forest's start on a turned torso); coast instead, and re-acquire if it persists.
                     q = FitQuality::Failed;
                 }
-                let follows = prior_pose.is_some_and(|p| fit.follows(&icp_cfg, q, min_support, &p, &pose))
+                let follows = prior_pose.is_some_and(|p| fit.follows(&icp_cfg, q, &p, &pose))
                     && lies_on_bed(&pose, &t.bed);
                 let better = match &best {
                     None => true,

@@ -184,21 +184,15 @@ impl TorsoFit {
 
     /// Whether this fit, which ended at `pose` with verdict `q`, moves the coasting pose `prior`
     /// ([`TorsoIcpConfig::follow_occluded`]; the caller adds the bed test): it is occluded, passes the floors an
-    /// acquisition takes at once, and lies at most `follow_m`/`follow_rad` from `prior` (a partial view's fit that
-    /// jumps is a local minimum, not the patient).
-    pub fn follows(
-        &self,
-        cfg: &TorsoIcpConfig,
-        q: FitQuality,
-        min_support: f32,
-        prior: &Isometry3,
-        pose: &Isometry3,
-    ) -> bool {
+    /// acquisition takes at once (`cfg.min_support`, not the tracking reference's ask: a patient who rolls or
+    /// shifts under the arm shows less of the surface the reference was measured on), and lies at most
+    /// `follow_m`/`follow_rad` from `prior` (a partial view's fit that jumps is a local minimum, not the patient).
+    pub fn follows(&self, cfg: &TorsoIcpConfig, q: FitQuality, prior: &Isometry3, pose: &Isometry3) -> bool {
         if !cfg.follow_occluded || q != FitQuality::Occluded {
             return false;
         }
         within(prior, pose, cfg.follow_m, cfg.follow_rad)
-            && self.quality(cfg, min_support, true) == FitQuality::Good
+            && self.quality(cfg, cfg.min_support, true) == FitQuality::Good
     }
 
     /// Whether a fit made without a pose is good enough to be taken at once (no confirmation).
@@ -638,40 +632,35 @@ mod tests {
         let f = fit(120, 118, 430, 2, 0);
         let q = f.quality(&on, on.min_support, false);
         assert_eq!(q, FitQuality::Occluded);
-        assert!(f.follows(&on, q, on.min_support, &prior, &near));
+        assert!(f.follows(&on, q, &prior, &near));
         // Off, it coasts.
         let off = TorsoIcpConfig {
             follow_occluded: false,
             ..on
         };
-        assert!(!f.follows(&off, q, on.min_support, &prior, &near));
+        assert!(!f.follows(&off, q, &prior, &near));
         // A jump of 10 cm or a turn of 20° is another local minimum.
-        assert!(!f.follows(
-            &on,
-            q,
-            on.min_support,
-            &prior,
-            &Isometry3::translation(0.1, 0.0, 0.0)
-        ));
+        assert!(!f.follows(&on, q, &prior, &Isometry3::translation(0.1, 0.0, 0.0)));
         let turned = Isometry3::from_parts(
             Translation3::identity(),
             UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 20f32.to_radians()),
         );
-        assert!(!f.follows(&on, q, on.min_support, &prior, &turned));
+        assert!(!f.follows(&on, q, &prior, &turned));
         // Too few pairs for an acquisition, or many seen through (support under the floor), is not followed.
         let few = fit(80, 80, 430, 0, 0);
-        assert!(!few.follows(
-            &on,
-            few.quality(&on, on.min_support, false),
-            on.min_support,
-            &prior,
-            &near
-        ));
+        assert!(!few.follows(&on, few.quality(&on, on.min_support, false), &prior, &near));
         let seen_through = fit(120, 118, 430, 120, 0);
         let q2 = seen_through.quality(&on, on.min_support, false);
-        assert!(!seen_through.follows(&on, q2, on.min_support, &prior, &near));
+        assert!(!seen_through.follows(&on, q2, &prior, &near));
         // A good fit is not "followed": it is tracked.
-        assert!(!f.follows(&on, FitQuality::Good, on.min_support, &prior, &near));
+        assert!(!f.follows(&on, FitQuality::Good, &prior, &near));
+        // Support 0.70: under what the tracking reference of a patient seen at 0.90 asks (0.78), over the
+        // acquisition's floor: followed (the patient rolled or shifted under the arm since the reference was set).
+        let moved = fit(120, 84, 430, 0, 0);
+        let q3 = moved.quality(&on, 0.9 - on.support_drop, false);
+        assert_eq!(q3, FitQuality::Occluded);
+        assert!(moved.support() < 0.9 - on.support_drop && moved.support() > on.min_support);
+        assert!(moved.follows(&on, q3, &prior, &near));
     }
 
     #[test]
