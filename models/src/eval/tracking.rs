@@ -14,7 +14,8 @@
 //!   does: vertex to vertex against the body model shaped with the true coefficients at the true torso pose.
 //! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm.
 //! - motion followed: the torso error's median over the [`MOTION_WINDOW`] frames after the patient's roll or shift
-//!   ends is at most [`MOTION_FOLLOWED_MM`] above its median over the frames before it began (a pose on both sides).
+//!   ends is at most [`MOTION_FOLLOWED_MM`] above its median over the frames before it began (not counted without a
+//!   pose before it; not followed without one after it).
 //! - tracked fraction: frames after the init phase whose state carries a pose.
 //! - latency: per-frame processing time on this machine (one thread), p50 and p99. The frames are scored against
 //!   the full truth after the sequence (each tracked surface kept once), so the scoring's queries do not empty the
