@@ -425,8 +425,8 @@ pub fn estimate_bed(
             // patient and the arm hid all of a 41° section's lowest 0.43 m in s29002, and the mattress went there).
             // Only a section larger than the chosen plane tells: the arm's links line up into tilted planes too,
             // reaching from beside the bed's base to high above the mattress, but smaller than a visible mattress.
-            let floor_below = floor.is_none() && below > FLOOR_TO_MATTRESS_M.0;
-            if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || floor_below) {
+            let chosen_is_floor = floor.is_none() && below > FLOOR_TO_MATTRESS_M.0;
+            if b.points > n && (below < -SECTION_BELOW_MATTRESS_M || chosen_is_floor) {
                 (section_level(&b), 0)
             } else {
                 (m, n)

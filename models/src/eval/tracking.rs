@@ -24,6 +24,7 @@
 //! Cost: one .oni decode and one tracker frame per frame and variant, plus the scoring (~1250 vertices).
 
 use anyhow::{Context, Result, bail, ensure};
+use clap::ValueEnum;
 use serde_json::{Value, json};
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
@@ -750,22 +751,18 @@ fn motion_score(m: &Motion, scores: &[FrameScore]) -> Value {
 /// Per motion kind, how many sequences' motions the tracker followed of those it had a pose before (`null`s left
 /// out): `{"roll": {"followed": n, "of": m}, "shift": ...}`.
 fn motions_followed(summaries: &[Value]) -> Value {
-    let mut out = serde_json::Map::new();
-    for kind in [MotionKind::Roll, MotionKind::Shift] {
+    let per_kind = MotionKind::value_variants().iter().map(|kind| {
+        // The kind as the per-sequence `motion` names it.
         let name = json!(kind);
         let verdicts: Vec<bool> = summaries
             .iter()
             .filter(|s| s["motion"]["kind"] == name)
             .filter_map(|s| s["motion"]["followed"].as_bool())
             .collect();
-        if let Some(key) = name.as_str() {
-            out.insert(
-                key.to_string(),
-                json!({"followed": verdicts.iter().filter(|&&f| f).count(), "of": verdicts.len()}),
-            );
-        }
-    }
-    Value::Object(out)
+        let counts = json!({"followed": verdicts.iter().filter(|&&f| f).count(), "of": verdicts.len()});
+        (name.as_str().unwrap_or_default().to_string(), counts)
+    });
+    Value::Object(per_kind.collect())
 }
 
 /// The recovery target: tracked again within this many frames after the full occlusion.
