@@ -16,11 +16,12 @@
 //! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) the fit starts
 //! from the forest's pose, that pose turned about the body axis, and the torso laid on the bed around it
 //! ([`bed_search`]); a good fit is trusted at once only when its residual is very low, otherwise once consecutive
-//! frames agree on it; while
-//! tracking, a good fit from a start other than the temporal one that lands far from it is not trusted (the
-//! patient does not jump). Pixels without depth over the torso count as hidden, so a torso under the arm's shadow
-//! coasts as occluded instead of being lost. While occluded, the pose follows a clean fit from the temporal start
-//! that stays near it, with that fit's rotation held where the little it sees does not fix it
+//! frames agree on it; while tracking, a good fit from a start other than the temporal one that lands far from it
+//! is not trusted (the patient does not jump), unless the pose's own fit is not good and the far fit sees clearly
+//! more of the torso on two frames in a row: then the pose was a wrong lock ([`TorsoIcpConfig::switch_margin`]).
+//! Pixels without depth over the torso count as hidden, so a torso under the arm's shadow coasts as occluded
+//! instead of being lost. While occluded, the pose follows a clean fit from the temporal start that stays near it,
+//! with that fit's rotation held where the little it sees does not fix it
 //! ([`TorsoIcpConfig::follow_occluded`], [`TrackerConfig::occluded_hold_rotation`]).
 //!
 //! The torso model is revised on the first tracked frames: lock refits of the shape (Eq. 7 from the tracked pose,
@@ -492,6 +493,9 @@ pub struct Tracker<'m, 's> {
     last_good_pose: Option<Isometry3>,
     /// The acquisition candidate awaiting confirmation and how many consistent frames found it.
     candidate: Option<(Isometry3, u8)>,
+    /// A far fit that sees more of the torso than the pose's own, awaiting its second frame
+    /// ([`TorsoIcpConfig::switch_margin`]).
+    switch_candidate: Option<Isometry3>,
     /// The support of a right fit of this patient with this shape: set at acquisition, followed while tracking.
     support_ref: Option<f32>,
     frames: u32,
@@ -646,6 +650,7 @@ impl<'m, 's> Tracker<'m, 's> {
             pose: None,
             last_good_pose: None,
             candidate: None,
+            switch_candidate: None,
             support_ref: None,
             frames: 0,
             seq: 0,
@@ -713,6 +718,7 @@ impl<'m, 's> Tracker<'m, 's> {
         self.pose = None;
         self.last_good_pose = None;
         self.candidate = None;
+        self.switch_candidate = None;
         self.support_ref = None;
     }
 
@@ -1338,6 +1344,9 @@ impl<'m, 's> Tracker<'m, 's> {
             };
             // The best fit, and whether it moves the coasting pose (`TorsoIcpConfig::follow_occluded`).
             let mut best: Option<(Isometry3, TorsoFit, FitQuality, bool)> = None;
+            // The temporal fit, and a far fit that sees more than it (`TorsoIcpConfig::switch_margin`).
+            let mut temporal: Option<TorsoFit> = None;
+            let mut switch: Option<(Isometry3, TorsoFit)> = None;
             for (i, start) in starts.iter().enumerate() {
                 let (cfg_i, params_i) = if from_prior(i) {
                     (&temporal_cfg, &temporal_params)
@@ -1365,6 +1374,15 @@ impl<'m, 's> Tracker<'m, 's> {
                 if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
                     q = FitQuality::Failed;
+                }
+                if from_prior(i) {
+                    temporal = Some(fit);
+                } else if let (Some(p), Some(own)) = (prior_pose, &temporal)
+                    && fit.replaces(&icp_cfg, own, &p, &pose)
+                    && switch.is_none_or(|(_, f)| fit.visible > f.visible)
+                    && lies_on_bed(&pose, &t.bed)
+                {
+                    switch = Some((pose, fit));
                 }
                 if q == FitQuality::Good
                     && !from_prior(i)
@@ -1399,6 +1417,24 @@ impl<'m, 's> Tracker<'m, 's> {
                     break;
                 }
             }
+            // A far fit that sees more of the torso than the pose's own, found at the same place on two frames in a
+            // row while the pose's fit is not good: the pose is a wrong lock whose fit calls the patient an occluder.
+            let mut switched = false;
+            match switch {
+                Some((pose, fit)) if best.is_some_and(|(_, _, q, _)| q != FitQuality::Good) => {
+                    if self
+                        .switch_candidate
+                        .is_some_and(|c| same_pose(&c, &pose, &icp_cfg))
+                    {
+                        best = Some((pose, fit, FitQuality::Good, false));
+                        self.switch_candidate = None;
+                        switched = true;
+                    } else {
+                        self.switch_candidate = Some(pose);
+                    }
+                }
+                _ => self.switch_candidate = None,
+            }
             match best {
                 None => {
                     self.candidate = None;
@@ -1416,7 +1452,7 @@ impl<'m, 's> Tracker<'m, 's> {
                             self.last_good_pose = Some(pose);
                             let sup = fit.support();
                             self.support_ref = Some(match (prior_pose, self.support_ref) {
-                                (Some(_), Some(r)) => r + SUPPORT_FOLLOW * (sup - r),
+                                (Some(_), Some(r)) if !switched => r + SUPPORT_FOLLOW * (sup - r),
                                 _ => sup,
                             });
                         }

@@ -74,6 +74,16 @@ pub struct TorsoIcpConfig {
     /// Largest turn an occluded fit may make in one frame and still be followed, radians (above `confirm_rad`: a
     /// re-acquired pose is often 5-10° off in roll, which the first partial views correct).
     pub follow_rad: f32,
+    /// While the pose's own fit is not good (the tracker coasts as occluded, or a fit failed), a fit from another
+    /// start that lies far from the pose, sees at least this much more of the torso than the pose's own fit and
+    /// passes the tracking floors on the acquisition's support floor replaces the pose, once two consecutive frames
+    /// find it at the same place ([`TorsoFit::replaces`]; 0: off). 0.1: on the 146 validation sequences and
+    /// 70001-70200 it replaced five wrong locks (s29005 41.9 -> 12.2 mm, s29052 39.1 -> 24.8 mm, s70116 38.8 -> 28.2
+    /// mm) and moved no sequence the other way; 0.2 replaced three, 0.05 also moved s70172 between wrong poses
+    /// (tracked 0.986 -> 0.871). With the acquisition's floors instead of the tracking ones, a far fit seeing a
+    /// quarter of a torso the arm hid left a right pose at 0.1 (s29018 4.7 -> 27.7 mm; docs/tracking.md,
+    /// twenty-second round).
+    pub switch_margin: f32,
     /// An occluder is an observed point this much nearer to the camera than the model surface, metres.
     pub occluder_margin_m: f32,
     /// Observed points in front of the model but lower than this above the bed are the patient, not an occluder
@@ -149,6 +159,7 @@ impl Default for TorsoIcpConfig {
             follow_occluded: true,
             follow_m: 0.06,
             follow_rad: 0.2,
+            switch_margin: 0.1,
             occluder_margin_m: 0.04,
             body_max_height_m: 0.22,
             max_distance_m: 0.1,
@@ -193,6 +204,24 @@ impl TorsoFit {
         }
         within(prior, pose, cfg.follow_m, cfg.follow_rad)
             && self.quality(cfg, cfg.min_support, true) == FitQuality::Good
+    }
+
+    /// Whether this fit, which ended at `pose` from a start other than the temporal one, replaces the pose `prior`
+    /// whose own fit is `own` ([`TorsoIcpConfig::switch_margin`]; the caller adds the bed test and the second
+    /// frame): it lies farther from `prior` than the confirmation tolerances, sees at least `switch_margin` more of
+    /// the torso than `own`, and is good by the tracking floors on the acquisition's support floor. A wrong lock's
+    /// fit calls the patient in front of its model an occluder and sees little of the torso, however clear the view.
+    pub fn replaces(
+        &self,
+        cfg: &TorsoIcpConfig,
+        own: &TorsoFit,
+        prior: &Isometry3,
+        pose: &Isometry3,
+    ) -> bool {
+        cfg.switch_margin > 0.0
+            && self.visible >= own.visible + cfg.switch_margin
+            && !within(prior, pose, cfg.confirm_m, cfg.confirm_rad)
+            && self.quality(cfg, cfg.min_support, false) == FitQuality::Good
     }
 
     /// Whether a fit made without a pose is good enough to be taken at once (no confirmation).
@@ -661,6 +690,48 @@ mod tests {
         assert_eq!(q3, FitQuality::Occluded);
         assert!(moved.support() < 0.9 - on.support_drop && moved.support() > on.min_support);
         assert!(moved.follows(&on, q3, &prior, &near));
+    }
+
+    #[test]
+    fn a_far_fit_replaces_the_pose_only_when_it_sees_clearly_more_of_the_torso() {
+        use crate::geometry::{Translation3, UnitQuaternion};
+        let on = TorsoIcpConfig::default();
+        assert!(on.switch_margin > 0.0);
+        let prior = Isometry3::identity();
+        // Validation s29005: a wrong lock turned 36° about the body axis pairs a third of the torso and calls the
+        // rest (the patient in front of its model) occluded; the arm hides 2 %.
+        let own = fit(170, 140, 400, 0, 10);
+        assert_eq!(own.quality(&on, on.min_support, false), FitQuality::Occluded);
+        let far = Isometry3::from_parts(
+            Translation3::new(0.03, 0.0, 0.02),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 30f32.to_radians()),
+        );
+        // The forest's start lands on the patient: 440 pairs, two thirds of the torso seen.
+        let clear = fit(440, 400, 200, 0, 20);
+        assert!(clear.visible >= own.visible + on.switch_margin);
+        assert!(clear.replaces(&on, &own, &prior, &far));
+        // Off, or near the pose (that is the pose's own basin, followed or tracked), it does not.
+        let off = TorsoIcpConfig {
+            switch_margin: 0.0,
+            ..on
+        };
+        assert!(!clear.replaces(&off, &own, &prior, &far));
+        assert!(!clear.replaces(&on, &own, &prior, &Isometry3::translation(0.01, 0.0, 0.0)));
+        // Under the arm's full occlusion the pose's fit sees 9 % and a far fit on the little left in view a
+        // quarter: more by the margin, but not enough of the torso for tracking (validation s29018 left its right
+        // pose for such a fit when the acquisition's floors were asked).
+        let hidden = fit(60, 60, 600, 0, 0);
+        let sliver = fit(150, 140, 450, 0, 0);
+        assert!(sliver.visible >= hidden.visible + on.switch_margin && sliver.visible < on.min_visible);
+        assert!(!sliver.replaces(&on, &hidden, &prior, &far));
+        // A far fit that sees about as much as the pose's own is another local minimum, not a better view.
+        let alike = fit(200, 180, 370, 0, 10);
+        assert!(alike.visible < own.visible + on.switch_margin);
+        assert!(!alike.replaces(&on, &own, &prior, &far));
+        // Seeing more is not enough without the acquisition's support: a fit seen through is no replacement.
+        let seen_through = fit(440, 200, 200, 200, 20);
+        assert!(seen_through.support() < on.min_support);
+        assert!(!seen_through.replaces(&on, &own, &prior, &far));
     }
 
     #[test]

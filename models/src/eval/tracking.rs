@@ -163,6 +163,11 @@ pub struct TrackingEvalArgs {
     /// above the bed are the patient, not the arm (default: the tracker's; 0: off, as before 2026-12-05)
     #[arg(long, value_parser = parse_body_height)]
     pub body_max_height: Option<f32>,
+    /// The tracker's `icp.switch_margin`: while the pose's own fit is not good, a far fit that sees this much more
+    /// of the torso replaces the pose on its second frame (default: the tracker's, 0.1; 0: off, as before
+    /// 2026-12-05's twenty-second round).
+    #[arg(long, value_parser = parse_visible_share)]
+    pub switch_margin: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -384,6 +389,9 @@ pub fn run_variant(
     }
     if let Some(h) = args.body_max_height {
         cfg.icp.body_max_height_m = h;
+    }
+    if let Some(m) = args.switch_margin {
+        cfg.icp.switch_margin = m;
     }
     if let Some(n) = args.shape_frames {
         cfg.shape_frames = n;
