@@ -78,8 +78,8 @@ pub struct TorsoIcpConfig {
     /// start that lies far from the pose, sees at least this much more of the torso than the pose's own fit and
     /// passes the tracking floors on the acquisition's support floor replaces the pose, once two consecutive frames
     /// find it at the same place ([`TorsoFit::replaces`]; 0: off). 0.1: on the 146 validation sequences and
-    /// 70001-70200 it replaced five wrong locks (s29005 41.9 -> 12.2 mm, s29052 39.1 -> 24.8 mm, s70116 38.8 -> 28.2
-    /// mm) and moved no sequence the other way; 0.2 replaced three, 0.05 also moved s70172 between wrong poses
+    /// 70001-70200 it mended five wrong locks (among them s29005 41.9 -> 12.2 mm, s29052 39.1 -> 24.8 mm, s70116 38.8
+    /// -> 28.2 mm) and moved no sequence the other way; 0.2 mended three, 0.05 also moved s70172 between wrong poses
     /// (tracked 0.986 -> 0.871). With the acquisition's floors instead of the tracking ones, a far fit seeing a
     /// quarter of a torso the arm hid left a right pose at 0.1 (s29018 4.7 -> 27.7 mm; docs/tracking.md,
     /// twenty-second round).
