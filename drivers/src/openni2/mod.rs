@@ -90,8 +90,7 @@ impl OpenNi2Source {
         }
         let label = uri.map_or_else(|| "openni2".to_owned(), |u| format!("openni2:{u}"));
         let device = Device::open(&ctx, uri).map_err(|e| to_source_error(e, &format!("opening {label}")))?;
-        let is_file = device.supports(sys::DEVICE_PROPERTY_PLAYBACK_SPEED)
-            && device.supports(sys::DEVICE_PROPERTY_PLAYBACK_REPEAT_ENABLED);
+        let is_file = device.is_playback();
         if is_file {
             device
                 .set_f32(sys::DEVICE_PROPERTY_PLAYBACK_SPEED, -1.0)

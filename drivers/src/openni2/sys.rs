@@ -8,12 +8,13 @@
 //!
 //! Lifetimes: [`Context`] proves the one process-wide `oniInitialize` happened (see its docs for why there is no
 //! `oniShutdown`); every [`Frame`] borrows its stream, and the owner drops recorder → stream (stop, destroy) →
-//! device (close), in that order.
+//! device (close), in that order; a playback device's streams are destroyed only after the device closes
+//! ([`Device::is_playback`]).
 #![allow(unsafe_code)]
 
 use std::ffi::{CStr, CString, c_char, c_int, c_void};
 use std::marker::PhantomData;
-use std::sync::OnceLock;
+use std::sync::{Arc, Mutex, OnceLock};
 
 // ---- OniCEnums.h ----
 /// `OniStatus` (OniCEnums.h).
@@ -352,6 +353,36 @@ impl DeviceInfo {
 pub struct Device {
     handle: *mut OniDeviceOpaque,
     ctx: Context,
+    /// For a playback device, the streams whose destruction waits for the device's close.
+    deferred: Option<Arc<Mutex<Deferred>>>,
+}
+
+/// The streams of a playback device that were dropped before it, and whether it is closed.
+///
+/// Why: the file driver's player thread walks the device's stream list without its lock (OpenNI2
+/// `Source/Drivers/OniFile/PlayerDevice.cpp`, `MainLoop`), so a stream destroyed while that thread runs can be freed
+/// under it: SIGSEGV in libOniFile.so, in 6 of 20 runs of `openni2_interop` beside other work on the 2-core host and
+/// in 40 of 40 beside two busy loops (0 of 40 with the order below). Closing
+/// the device first joins the player thread (`PlayerDevice::close`), and after the close OpenNI's core no longer
+/// calls into the driver when a stream is destroyed (`Source/Core/OniStream.cpp`, `~VideoStream`: no
+/// `deviceDestroyStream` once the device's handle is NULL), so a playback stream is stopped on drop (the driver
+/// then ignores the player's frames: `PlayerStream::OnNewDataCallback`) and destroyed after the device closes.
+#[derive(Debug, Default)]
+struct Deferred {
+    closed: bool,
+    streams: Vec<StreamPtr>,
+}
+
+/// A stream handle waiting in [`Deferred`].
+#[derive(Debug)]
+struct StreamPtr(*mut OniStreamOpaque);
+
+// SAFETY: see `Device`: the handle is only destroyed, once, by whichever owner drops last.
+unsafe impl Send for StreamPtr {}
+
+fn lock(d: &Mutex<Deferred>) -> std::sync::MutexGuard<'_, Deferred> {
+    // A panic while holding this lock leaves a consistent list (pushes and a flag); keep closing.
+    d.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 impl Device {
@@ -369,10 +400,22 @@ impl Device {
         let ptr = c.as_ref().map_or(std::ptr::null(), |c| c.as_ptr());
         // SAFETY: `ptr` is NULL (any device) or a NUL-terminated string alive for the call; `handle` is an out-param.
         check(unsafe { oniDeviceOpen(ptr, &mut handle) }, "oniDeviceOpen")?;
-        Ok(Device {
+        let mut device = Device {
             handle,
             ctx: ctx.clone(),
-        })
+            deferred: None,
+        };
+        if device.supports(DEVICE_PROPERTY_PLAYBACK_SPEED)
+            && device.supports(DEVICE_PROPERTY_PLAYBACK_REPEAT_ENABLED)
+        {
+            device.deferred = Some(Arc::default());
+        }
+        Ok(device)
+    }
+
+    /// Whether this is a playback device (an .oni file: it has the playback speed and repeat properties).
+    pub fn is_playback(&self) -> bool {
+        self.deferred.is_some()
     }
 
     /// The device's description.
@@ -435,6 +478,7 @@ impl Device {
         Ok(Stream {
             handle,
             started: false,
+            deferred: self.deferred.clone(),
             _ctx: self.ctx.clone(),
         })
     }
@@ -442,10 +486,21 @@ impl Device {
 
 impl Drop for Device {
     fn drop(&mut self) {
-        // SAFETY: the handle is open and closed exactly once; streams were created from it but the owner drops them
-        // first (field order in OpenNi2Source), and OpenNI tolerates closing with streams alive anyway.
+        // SAFETY: the handle is open and closed exactly once. A live device's streams were destroyed before (field
+        // order in OpenNi2Source); a playback device's dropped streams wait in `deferred` and are destroyed exactly
+        // once here, after the close (see `Deferred`).
         unsafe {
             oniDeviceClose(self.handle);
+        }
+        if let Some(d) = &self.deferred {
+            let mut d = lock(d);
+            d.closed = true;
+            for s in d.streams.drain(..) {
+                // SAFETY: a stream handle of this device, stopped and not destroyed yet (its owner is gone).
+                unsafe {
+                    oniStreamDestroy(s.0);
+                }
+            }
         }
     }
 }
@@ -454,11 +509,13 @@ impl Drop for Device {
 // two threads at once because the owners need `&mut` for frame reads.
 unsafe impl Send for Device {}
 
-/// A depth stream; stopped and destroyed on drop.
+/// A depth stream; stopped and destroyed on drop (a playback device's: destroyed once the device is closed).
 #[derive(Debug)]
 pub struct Stream {
     handle: *mut OniStreamOpaque,
     started: bool,
+    /// The playback device's deferral ([`Deferred`]); `None` for a live device.
+    deferred: Option<Arc<Mutex<Deferred>>>,
     _ctx: Context,
 }
 
@@ -569,11 +626,22 @@ impl Stream {
 
 impl Drop for Stream {
     fn drop(&mut self) {
-        // SAFETY: the handle is live and destroyed exactly once; no Frame borrows it (they borrow `&mut self`).
-        unsafe {
-            if self.started {
+        if self.started {
+            // SAFETY: the handle is live; no Frame borrows it (they borrow `&mut self`).
+            unsafe {
                 oniStreamStop(self.handle);
             }
+        }
+        if let Some(d) = &self.deferred {
+            let mut d = lock(d);
+            if !d.closed {
+                // The device destroys it after its close (see `Deferred`).
+                d.streams.push(StreamPtr(self.handle));
+                return;
+            }
+        }
+        // SAFETY: the handle is destroyed exactly once: here, or by the device if it was deferred above.
+        unsafe {
             oniStreamDestroy(self.handle);
         }
     }
