@@ -6,7 +6,9 @@
 //!
 //! .oni files (`openni2:PATH`) play with PLAYBACK_SPEED = -1 (manual: exactly one frame per read, none dropped) and
 //! repeat off; the end is detected by a frame count (NUMBER_OF_FRAMES) and, failing that, by
-//! `oniWaitForAnyStream` timing out. Seeking is never used: it crashes the Debian build's player thread.
+//! `oniWaitForAnyStream` timing out. Seeking is never used: it crashes the Debian build's player thread. Nor is a
+//! file's stream destroyed before its device closes: the player thread reads the stream list unlocked (`sys.rs`,
+//! `Deferred`).
 //!
 //! # Timing and cost
 //! `next_frame` waits in `oniWaitForAnyStream` for at most the timeout (files: at least [`FILE_EOF_WAIT`], since a
@@ -47,7 +49,7 @@ pub fn list_devices() -> Result<Vec<DeviceInfo>, SourceError> {
 
 /// A depth stream from libOpenNI2: a live device or an .oni file it plays.
 pub struct OpenNi2Source {
-    // Drop order: recorder, stream, device, context.
+    // Drop order: recorder, stream, device, context (a file's stream is destroyed by the device, after its close).
     recorder: Option<Recorder>,
     stream: Stream,
     device: Device,
