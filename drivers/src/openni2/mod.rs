@@ -8,7 +8,9 @@
 //! repeat off; the end is detected by a frame count (NUMBER_OF_FRAMES) and, failing that, by
 //! `oniWaitForAnyStream` timing out. Seeking is never used: it crashes the Debian build's player thread. Nor is a
 //! file's stream destroyed before its device closes: the player thread reads the stream list unlocked (`sys.rs`,
-//! `Deferred`).
+//! `Deferred`). Known and left: closing a file while its player still has frames to deliver is slow (about a second)
+//! and, closed that way 60 times in one process, libOniFile still crashed in 7 of 19 runs (2026-12-05; another race
+//! in the player, not found yet). The pure-Rust reader (`file:PATH`) has no player thread.
 //!
 //! # Timing and cost
 //! `next_frame` waits in `oniWaitForAnyStream` for at most the timeout (files: at least [`FILE_EOF_WAIT`], since a
