@@ -544,11 +544,6 @@ fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
         && bed_search::along_the_bed(camera_from_torso, bed)
 }
 
-/// Whether two torso poses are the same within the confirmation tolerances.
-fn same_pose(a: &Isometry3, b: &Isometry3, cfg: &TorsoIcpConfig) -> bool {
-    torso_icp::within(a, b, cfg.confirm_m, cfg.confirm_rad)
-}
-
 /// The share of the torso a lock refit's frame must show after `waited` frames with a pose and refits waiting:
 /// [`TrackerConfig::refit_min_visible`], then [`TrackerConfig::refit_late_min_visible`] from
 /// [`TrackerConfig::refit_late_frames`] on (never when that is 0).
@@ -1371,30 +1366,30 @@ impl<'m, 's> Tracker<'m, 's> {
                     watch,
                 );
                 let mut q = fit.quality(&icp_cfg, min_support, prior_pose.is_none());
-                if q == FitQuality::Good && !lies_on_bed(&pose, &t.bed) {
+                let on_bed = lies_on_bed(&pose, &t.bed);
+                if q == FitQuality::Good && !on_bed {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
                     q = FitQuality::Failed;
                 }
                 if from_prior(i) {
                     temporal = Some(fit);
                 } else if let (Some(p), Some(own)) = (prior_pose, &temporal)
+                    && on_bed
                     && fit.replaces(&icp_cfg, own, &p, &pose)
-                    && switch.is_none_or(|(_, f)| fit.visible > f.visible)
-                    && lies_on_bed(&pose, &t.bed)
                 {
+                    // With a pose the only other start is the forest's: one candidate at most.
                     switch = Some((pose, fit));
                 }
                 if q == FitQuality::Good
                     && !from_prior(i)
                     && let Some(p) = prior_pose
-                    && !same_pose(&p, &pose, &icp_cfg)
+                    && !icp_cfg.same_pose(&p, &pose)
                 {
                     // While tracking, the patient cannot jump: a good fit far from the prior is another local
                     // minimum (the forest's start on a turned torso); coast instead, and re-acquire if it persists.
                     q = FitQuality::Failed;
                 }
-                let follows = prior_pose.is_some_and(|p| fit.follows(&icp_cfg, q, &p, &pose))
-                    && lies_on_bed(&pose, &t.bed);
+                let follows = on_bed && prior_pose.is_some_and(|p| fit.follows(&icp_cfg, q, &p, &pose));
                 let better = match &best {
                     None => true,
                     Some((_, bf, bq, _)) => {
@@ -1424,7 +1419,7 @@ impl<'m, 's> Tracker<'m, 's> {
                 Some((pose, fit)) if best.is_some_and(|(_, _, q, _)| q != FitQuality::Good) => {
                     if self
                         .switch_candidate
-                        .is_some_and(|c| same_pose(&c, &pose, &icp_cfg))
+                        .is_some_and(|c| icp_cfg.same_pose(&c, &pose))
                     {
                         best = Some((pose, fit, FitQuality::Good, false));
                         self.switch_candidate = None;
@@ -1610,7 +1605,7 @@ impl<'m, 's> Tracker<'m, 's> {
             return q;
         }
         let run = match self.candidate {
-            Some((c, n)) if same_pose(&c, &pose, &cfg) => n.saturating_add(1),
+            Some((c, n)) if cfg.same_pose(&c, &pose) => n.saturating_add(1),
             _ => 1,
         };
         if fit.sure(&cfg) || run >= cfg.acquire_confirm {

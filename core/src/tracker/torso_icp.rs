@@ -127,6 +127,12 @@ pub struct TorsoIcpConfig {
 }
 
 impl TorsoIcpConfig {
+    /// Whether two torso poses are the same within the confirmation tolerances (`confirm_m`, `confirm_rad`): an
+    /// acquisition's consecutive frames, the patient who does not jump, a switch's second frame.
+    pub fn same_pose(&self, a: &Isometry3, b: &Isometry3) -> bool {
+        within(a, b, self.confirm_m, self.confirm_rad)
+    }
+
     /// A count of the fit's association (made on every `stride`-th vertex) in model points: what the pair floors
     /// are stated in.
     pub fn model_points(&self, counted: usize) -> usize {
@@ -220,7 +226,7 @@ impl TorsoFit {
     ) -> bool {
         cfg.switch_margin > 0.0
             && self.visible >= own.visible + cfg.switch_margin
-            && !within(prior, pose, cfg.confirm_m, cfg.confirm_rad)
+            && !cfg.same_pose(prior, pose)
             && self.quality(cfg, cfg.min_support, false) == FitQuality::Good
     }
 

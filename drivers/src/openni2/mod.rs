@@ -57,7 +57,6 @@ pub struct OpenNi2Source {
     device: Device,
     ctx: Context,
     label: String,
-    is_file: bool,
     frames_in_file: Option<u32>,
     frames_read: u32,
     mode: OniVideoMode,
@@ -184,7 +183,6 @@ impl OpenNi2Source {
             device,
             ctx,
             label,
-            is_file,
             frames_in_file,
             frames_read: 0,
             mode,
@@ -196,7 +194,7 @@ impl OpenNi2Source {
 
     /// Whether this is an .oni file played by OpenNI2 (rather than a live device).
     pub fn is_file(&self) -> bool {
-        self.is_file
+        self.device.is_playback()
     }
 
     /// The device's description from OpenNI2.
@@ -226,7 +224,7 @@ impl DepthSource for OpenNi2Source {
             self.ended = true;
             return Err(SourceError::end_of_stream());
         }
-        let wait = if self.is_file {
+        let wait = if self.is_file() {
             timeout.max(FILE_EOF_WAIT)
         } else {
             timeout
@@ -234,7 +232,7 @@ impl DepthSource for OpenNi2Source {
         let ms = wait.as_millis().min(i32::MAX as u128) as i32;
         match self.stream.wait(ms) {
             Ok(true) => {}
-            Ok(false) if self.is_file => {
+            Ok(false) if self.is_file() => {
                 self.ended = true;
                 return Err(SourceError::end_of_stream());
             }
@@ -299,7 +297,7 @@ impl DepthSource for OpenNi2Source {
     }
 
     fn describe(&self) -> String {
-        let kind = if self.is_file {
+        let kind = if self.is_file() {
             "file played by libOpenNI2"
         } else {
             "live"
