@@ -145,9 +145,10 @@ fn main() -> Result<()> {
             match &result {
                 Err(e) => println!("  frame {f}: no bed ({e:?})"),
                 Ok(bed) => println!(
-                    "  frame {f}: mattress off {:.1} deg / {:.0} mm, section {}",
+                    "  frame {f}: mattress off {:.1} deg / {:.0} mm ({:+.0} mm high), section {}",
                     degrees_between(&bed.mattress.normal(), &truth[0].normal()),
                     (bed.mattress.d - truth[0].d).abs() * 1000.0,
+                    (truth[0].d - bed.mattress.d) * 1000.0,
                     bed.head_section.map_or("none".into(), |h| format!(
                         "{:.0} deg",
                         degrees_between(&h.normal(), &bed.mattress.normal())
