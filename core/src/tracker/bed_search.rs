@@ -43,7 +43,7 @@ pub fn grid_starts(forest: &Isometry3, bed: &BedScene, back_m: f32) -> Vec<Isome
     let hip = Point3::from(forest.translation.vector);
     let mut out = Vec::new();
     let up = bed.mattress.normal();
-    let mut lie_on = |plane: &Plane, toward: Vector3| {
+    let mut lie_on = |plane: &Plane, toward: Vector3, hip: Point3| {
         let z = plane.normal();
         let Some(x) = (across - z * across.dot(&z)).try_normalize(1e-6) else {
             return;
@@ -63,12 +63,53 @@ pub fn grid_starts(forest: &Isometry3, bed: &BedScene, back_m: f32) -> Vec<Isome
             }
         }
     };
-    lie_on(&bed.mattress, forest_axis);
+    lie_on(&bed.mattress, forest_axis, hip);
     if let Some(head) = bed.head_section {
-        // The head lies up the raised section: the body axis rises away from the mattress.
-        lie_on(&head, up);
+        // The head lies up the raised section: the body axis rises away from the mattress. A forest's hip centre
+        // too far toward the foot end for a patient on the section (the legs taken for the torso) moves to the
+        // hinge, where the patient's hips are.
+        let on_section = match (hinge_offset_m(&hip, bed), up_the_bed(bed)) {
+            (Some(s), Some(u)) if s < -MAX_HIPS_BELOW_HINGE_M => hip - u * s,
+            _ => hip,
+        };
+        lie_on(&head, up, on_section);
     }
     out
+}
+
+/// How far toward the foot end of a raised head section's hinge the hip centre of a patient lying on the bed can be,
+/// metres. On the choice sets' 78 sections the init phase found, the true hip centre lies at most 0.23 m toward the
+/// foot end of the found hinge (a mattress placed up to 0.26 m high moves the hinge up the bed), the tracked poses at
+/// most 0.27 m; the legs taken for the torso (held-out s41074) 0.28-0.42 m (docs/tracking.md, twenty-third round).
+pub const MAX_HIPS_BELOW_HINGE_M: f32 = 0.3;
+
+/// Where `p` lies along the bed from a raised head section's hinge, metres, measured in the mattress plane: positive
+/// up the section (toward the head end); `None` without a raised section.
+pub fn hinge_offset_m(p: &Point3, bed: &BedScene) -> Option<f32> {
+    let head = bed.head_section?;
+    let (m, h) = (bed.mattress.normal(), head.normal());
+    let sin = m.cross(&h).norm();
+    if sin < 1e-3 {
+        return None;
+    }
+    // In the cut through the bed's axis (u along the bed toward the head, z up from the mattress, the hinge at the
+    // origin) the mattress is z = 0 and the section -u sin + z cos = 0, so u = (z cos - distance to the section) / sin.
+    let (z, b) = (bed.mattress.signed_distance(p), head.signed_distance(p));
+    Some((z * m.dot(&h) - b) / sin)
+}
+
+/// The direction along the mattress toward the raised head section (`None` without one).
+fn up_the_bed(bed: &BedScene) -> Option<Vector3> {
+    let (m, h) = (bed.mattress.normal(), bed.head_section?.normal());
+    // The section's normal leans toward the foot end.
+    (m * m.dot(&h) - h).try_normalize(1e-6)
+}
+
+/// Whether a torso's hip centre lies where a patient on a raised head section's bed can lie it (no farther toward the
+/// foot end than [`MAX_HIPS_BELOW_HINGE_M`]); always on a flat bed.
+pub fn near_the_hinge(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
+    let hip = Point3::from(camera_from_torso.translation.vector);
+    hinge_offset_m(&hip, bed).is_none_or(|s| s >= -MAX_HIPS_BELOW_HINGE_M)
 }
 
 /// Most a torso's long axis turns from the bed's, on the mattress plane, when the head section is raised, degrees:
@@ -183,6 +224,58 @@ mod tests {
             let height = normal_bed.dot(&in_bed.translation.vector);
             assert!((height - 0.1).abs() < 1e-4, "back {height} above the section");
         }
+    }
+
+    #[test]
+    fn a_hip_centre_far_toward_the_foot_end_of_a_raised_sections_hinge_is_not_a_patients() {
+        let mut bed = bed();
+        let bed_from_camera = bed.volume.bed_from_camera;
+        let camera_from_bed = bed_from_camera.inverse();
+        let at = |y: f32, z: f32| camera_from_bed * Isometry3::translation(0.0, y, z);
+        // A flat bed has no hinge: a torso may lie anywhere along it.
+        assert_eq!(
+            hinge_offset_m(&Point3::from(at(-0.6, 0.1).translation.vector), &bed),
+            None
+        );
+        assert!(near_the_hinge(&at(-0.6, 0.1), &bed));
+        // Raised 20° about the bed's x axis at the hinge y = 0, rising toward +y.
+        let slope = 20f32.to_radians();
+        let normal_bed = Vector3::new(0.0, -libm::sinf(slope), libm::cosf(slope));
+        bed.head_section = Some(Plane::through(
+            camera_from_bed.translation.vector,
+            camera_from_bed.rotation * normal_bed,
+        ));
+        // The offset is the distance along the bed from the hinge, at any height over the mattress or the section.
+        for (y, z) in [(-0.6, 0.1), (-0.2, 0.25), (0.0, 0.0), (0.3, 0.15), (0.5, 0.3)] {
+            let s = hinge_offset_m(&Point3::from(at(y, z).translation.vector), &bed).unwrap();
+            assert!((s - y).abs() < 1e-4, "({y}, {z}): {s}");
+        }
+        assert!(near_the_hinge(&at(-0.25, 0.1), &bed));
+        assert!(near_the_hinge(&at(0.4, 0.25), &bed));
+        assert!(!near_the_hinge(&at(-0.35, 0.1), &bed));
+        // The forest put the hips on the legs, 0.6 m down the bed: the mattress starts stay there, the section's
+        // move to the hinge.
+        let forest = at(-0.6, 0.2);
+        let starts = grid_starts(&forest, &bed, 0.1);
+        let centre = |starts: &[Isometry3]| {
+            let c = starts.iter().fold(Vector3::zeros(), |c, s| {
+                c + (bed_from_camera * s).translation.vector
+            });
+            c / starts.len() as f32
+        };
+        assert!((centre(&starts[..STARTS]).y + 0.6).abs() < 1e-4);
+        let on_section = centre(&starts[STARTS..]);
+        assert!(
+            on_section.y.abs() < 0.05,
+            "section starts centred at {on_section:?}"
+        );
+        // Hips near enough the hinge are not moved (only laid on the section's plane, 5 cm up the bed here).
+        let starts = grid_starts(&at(-0.2, 0.2), &bed, 0.1);
+        let on_section = centre(&starts[STARTS..]);
+        assert!(
+            (on_section.y + 0.147).abs() < 0.01,
+            "section starts centred at {on_section:?}"
+        );
     }
 
     #[test]

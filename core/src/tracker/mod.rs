@@ -542,6 +542,7 @@ fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
     (-0.05..=MAX_HIP_HEIGHT_M).contains(&h)
         && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
         && bed_search::along_the_bed(camera_from_torso, bed)
+        && bed_search::near_the_hinge(camera_from_torso, bed)
 }
 
 /// The share of the torso a lock refit's frame must show after `waited` frames with a pose and refits waiting:
