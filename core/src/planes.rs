@@ -1116,6 +1116,7 @@ mod tests {
     use super::*;
     use crate::depth::{HEIGHT, PIXELS, WIDTH};
     use crate::time::Timestamp;
+    use std::boxed::Box;
     use std::vec;
 
     /// A camera 1.4 m above a mattress looking down at 25° from vertical, the floor 0.55 m below the mattress, a
@@ -1330,44 +1331,61 @@ mod tests {
     fn bared_base_scene(tilted: Option<f32>) -> (Isometry3, vec::Vec<u16>) {
         let raise = 35f32.to_radians();
         let (sr, cr) = (libm::sinf(raise), libm::cosf(raise));
-        let eye = Vector3::new(-1.3, 0.2, 1.2);
-        let world_from_camera = looking_at(eye, Vector3::new(0.0, 0.45, 0.0));
         let section_n = Vector3::new(0.0, -sr, cr);
+        let up_slope = move |p: Vector3| p.y * cr + p.z * sr;
+        let mut plates: vec::Vec<Plate> = vec![
+            (
+                section_n,
+                0.0,
+                Box::new(move |p| p.x.abs() < 0.45 && (0.0..=0.9).contains(&up_slope(p))),
+            ),
+            // The patient's back half lying on the section: a block 0.2 m thick.
+            (
+                section_n,
+                0.2,
+                Box::new(move |p| p.x.abs() < 0.2 && (0.1..=0.7).contains(&up_slope(p))),
+            ),
+            (
+                Vector3::z(),
+                -0.15,
+                Box::new(|p| p.x.abs() < 0.45 && (0.0..1.0).contains(&p.y)),
+            ),
+            (
+                Vector3::z(),
+                0.0,
+                Box::new(|p| p.x.abs() < 0.45 && (-0.04..0.0).contains(&p.y)),
+            ),
+            (Vector3::z(), -0.75, Box::new(|_| true)),
+        ];
+        if let Some(deg) = tilted {
+            let (st, ct) = (libm::sinf(deg.to_radians()), libm::cosf(deg.to_radians()));
+            plates.push((
+                Vector3::new(-st, 0.0, ct),
+                -0.05 * ct,
+                Box::new(|p| p.x.abs() < 0.45 && (-0.75..-0.15).contains(&p.y)),
+            ));
+        }
+        plates_seen_from(
+            Vector3::new(-1.3, 0.2, 1.2),
+            Vector3::new(0.0, 0.45, 0.0),
+            &plates,
+        )
+    }
+
+    /// A plate: the plane `n·p = c` (world frame) where `inside(p)`.
+    type Plate = (Vector3, f32, Box<dyn Fn(Vector3) -> bool>);
+
+    /// The camera at `eye` looking at `target` (world z up) and the depth of the nearest of `plates` along each ray.
+    fn plates_seen_from(eye: Vector3, target: Vector3, plates: &[Plate]) -> (Isometry3, vec::Vec<u16>) {
+        let world_from_camera = looking_at(eye, target);
         let depth = depth_of(|ray_c| {
             let ray = world_from_camera.rotation * ray_c;
-            let mut best = f32::INFINITY;
-            // Nearest hit of the ray with the plane n·p = c inside `inside`.
-            let mut hit = |n: Vector3, c: f32, inside: &dyn Fn(Vector3) -> bool| {
+            let hits = plates.iter().filter_map(|(n, c, inside)| {
                 let dn = n.dot(&ray);
-                if dn.abs() > 1e-6 {
-                    let t = (c - n.dot(&eye)) / dn;
-                    let p = eye + ray * t;
-                    if t > 0.0 && t < best && inside(p) {
-                        best = t;
-                    }
-                }
-            };
-            hit(section_n, 0.0, &|p| {
-                p.x.abs() < 0.45 && (0.0..=0.9).contains(&(p.y * cr + p.z * sr))
+                let t = (c - n.dot(&eye)) / dn;
+                (dn.abs() > 1e-6 && t > 0.0 && inside(eye + ray * t)).then_some(t)
             });
-            // The patient's back half lying on the section: a block 0.2 m thick.
-            hit(section_n, 0.2, &|p| {
-                p.x.abs() < 0.2 && (0.1..=0.7).contains(&(p.y * cr + p.z * sr))
-            });
-            hit(Vector3::z(), -0.15, &|p| {
-                p.x.abs() < 0.45 && (0.0..1.0).contains(&p.y)
-            });
-            hit(Vector3::z(), 0.0, &|p| {
-                p.x.abs() < 0.45 && (-0.04..0.0).contains(&p.y)
-            });
-            if let Some(deg) = tilted {
-                let (st, ct) = (libm::sinf(deg.to_radians()), libm::cosf(deg.to_radians()));
-                hit(Vector3::new(-st, 0.0, ct), -0.05 * ct, &|p| {
-                    p.x.abs() < 0.45 && (-0.75..-0.15).contains(&p.y)
-                });
-            }
-            hit(Vector3::z(), -0.75, &|_| true);
-            best.is_finite().then_some(best)
+            hits.min_by(f32::total_cmp)
         });
         (world_from_camera.inverse(), depth)
     }
@@ -1605,43 +1623,38 @@ mod tests {
     fn side_face_scene() -> (Isometry3, vec::Vec<u16>) {
         let raise = 16f32.to_radians();
         let (sr, cr) = (libm::sinf(raise), libm::cosf(raise));
-        let eye = Vector3::new(-1.3, 0.1, 1.1);
-        let world_from_camera = looking_at(eye, Vector3::new(0.0, 0.1, 0.0));
         let section_n = Vector3::new(0.0, -sr, cr);
-        let depth = depth_of(|ray_c| {
-            let ray = world_from_camera.rotation * ray_c;
-            let mut best = f32::INFINITY;
-            let mut hit = |n: Vector3, c: f32, inside: &dyn Fn(Vector3) -> bool| {
-                let dn = n.dot(&ray);
-                if dn.abs() > 1e-6 {
-                    let t = (c - n.dot(&eye)) / dn;
-                    let p = eye + ray * t;
-                    if t > 0.0 && t < best && inside(p) {
-                        best = t;
-                    }
-                }
-            };
-            let up_slope = |p: Vector3| p.y * cr + p.z * sr;
-            hit(section_n, 0.0, &|p| {
-                p.x.abs() < 0.45 && (0.0..=0.9).contains(&up_slope(p))
-            });
-            hit(section_n, 0.2, &|p| {
-                p.x.abs() < 0.22 && (0.05..=0.6).contains(&up_slope(p))
-            });
-            hit(Vector3::z(), 0.0, &|p| {
-                p.x.abs() < 0.45 && (-1.0..0.0).contains(&p.y)
-            });
-            hit(Vector3::z(), 0.2, &|p| {
-                p.x.abs() < 0.22 && (-0.95..0.0).contains(&p.y)
-            });
+        let up_slope = move |p: Vector3| p.y * cr + p.z * sr;
+        let plates: [Plate; 6] = [
+            (
+                section_n,
+                0.0,
+                Box::new(move |p| p.x.abs() < 0.45 && (0.0..=0.9).contains(&up_slope(p))),
+            ),
+            (
+                section_n,
+                0.2,
+                Box::new(move |p| p.x.abs() < 0.22 && (0.05..=0.6).contains(&up_slope(p))),
+            ),
+            (
+                Vector3::z(),
+                0.0,
+                Box::new(|p| p.x.abs() < 0.45 && (-1.0..0.0).contains(&p.y)),
+            ),
+            (
+                Vector3::z(),
+                0.2,
+                Box::new(|p| p.x.abs() < 0.22 && (-0.95..0.0).contains(&p.y)),
+            ),
             // The mattress's side face and the bed's frame under it, facing the camera.
-            hit(-Vector3::x(), 0.45, &|p| {
-                (-1.0..0.0).contains(&p.y) && (-0.29..0.0).contains(&p.z)
-            });
-            hit(Vector3::z(), -0.75, &|_| true);
-            best.is_finite().then_some(best)
-        });
-        (world_from_camera.inverse(), depth)
+            (
+                -Vector3::x(),
+                0.45,
+                Box::new(|p| (-1.0..0.0).contains(&p.y) && (-0.29..0.0).contains(&p.z)),
+            ),
+            (Vector3::z(), -0.75, Box::new(|_| true)),
+        ];
+        plates_seen_from(Vector3::new(-1.3, 0.1, 1.1), Vector3::new(0.0, 0.1, 0.0), &plates)
     }
 
     #[test]
