@@ -4,7 +4,7 @@
 //! own pose, the acquisition tries the model lying flat on the mattress along the bed (toward the end the forest's
 //! shoulders point at), on a grid around the forest's hip centre, screens each start with a few ICP iterations and
 //! refines the best ones fully. The same constraint judges fits ([`along_the_bed`]): on a raised head section, whose
-//! slope gives the bed's axis exactly, a torso points up it.
+//! slope gives the bed's axis exactly, a torso points up it, and its hips lie near the hinge ([`near_the_hinge`]).
 //!
 //! Cost per acquiring frame: [`STARTS`] screening fits of [`SCREEN_ITERATIONS`] ICP iterations on every fourth torso
 //! vertex (the tracker's `screen_stride`; about 0.5-1 ms with the default model); nothing while tracking; nothing
