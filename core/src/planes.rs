@@ -25,7 +25,8 @@
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once). Telling
 //! floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a million
 //! comparisons). The head-section tests add a few passes over the points and up to 256 local normals (four depth reads
-//! each) per tilted plane. The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller
+//! each) per tilted plane; with a raised section, its bottom takes the local normal of each of the section's points
+//! at every height query (about 0.5 ms more, 3.6 -> 4.1 ms median on the choice sets' 78 raised first frames). The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller
 //! lends the scratch.
 
 use crate::camera::Intrinsics;
