@@ -17,7 +17,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::geometry::Plane;
 use supine_core::planes::{self, BedScene, PlaneConfig};
 use supine_core::rng::mix_seed;
-use supine_core::tracker::TrackerConfig;
+use supine_core::tracker::{TrackerConfig, bed_vote};
 use supine_drivers::oni::OniReader;
 use supine_models::eval::tracking_truth::{TrackingTruth, sequence_dirs};
 
@@ -131,6 +131,7 @@ fn main() -> Result<()> {
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_default();
         println!("{name}: true head raise {raise:.0} deg");
+        let mut beds = Vec::new();
         for f in 0..frames {
             let frame = reader
                 .read_frame()
@@ -144,16 +145,10 @@ fn main() -> Result<()> {
             let result = planes::estimate_bed(&frame, &k, &cfg, Some(&up), &mut pts, &mut labels);
             match &result {
                 Err(e) => println!("  frame {f}: no bed ({e:?})"),
-                Ok(bed) => println!(
-                    "  frame {f}: mattress off {:.1} deg / {:.0} mm ({:+.0} mm high), section {}",
-                    degrees_between(&bed.mattress.normal(), &truth[0].normal()),
-                    (bed.mattress.d - truth[0].d).abs() * 1000.0,
-                    (truth[0].d - bed.mattress.d) * 1000.0,
-                    bed.head_section.map_or("none".into(), |h| format!(
-                        "{:.0} deg",
-                        degrees_between(&h.normal(), &bed.mattress.normal())
-                    ))
-                ),
+                Ok(bed) => {
+                    println!("  frame {f}: {}", against_truth(bed, &truth[0]));
+                    beds.push(*bed);
+                }
             }
             describe_planes(
                 &pts,
@@ -166,6 +161,26 @@ fn main() -> Result<()> {
                 Some((&frame, &k)),
             );
         }
+        // What the tracker keeps with `bed_frames` = FRAMES (when every frame found a bed; the tracker votes on the
+        // frames it tried).
+        if let Some(first) = beds.first() {
+            let kept = bed_vote::replacement(&beds, first).unwrap_or(*first);
+            println!("  voted over {frames}: {}", against_truth(&kept, &truth[0]));
+        }
     }
     Ok(())
+}
+
+/// The mattress's error against the true mattress `truth`, and the section's angle.
+fn against_truth(bed: &BedScene, truth: &Plane) -> String {
+    format!(
+        "mattress off {:.1} deg / {:.0} mm ({:+.0} mm high), section {}",
+        degrees_between(&bed.mattress.normal(), &truth.normal()),
+        (bed.mattress.d - truth.d).abs() * 1000.0,
+        (truth.d - bed.mattress.d) * 1000.0,
+        bed.head_section.map_or("none".into(), |h| format!(
+            "{:.0} deg",
+            degrees_between(&h.normal(), &bed.mattress.normal())
+        ))
+    )
 }

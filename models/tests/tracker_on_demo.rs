@@ -214,6 +214,67 @@ fn the_init_fit_lets_the_first_acquisition_confirm_a_frame_sooner() {
     );
 }
 
+/// The init phase's last frame and its bed when the first frame is seen `shift_mm` farther away (the whole scene).
+fn init_with_first_frame_shifted(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    frames: &[(Vec<u16>, Timestamp)],
+    shift_mm: u16,
+) -> (usize, supine_core::planes::BedScene) {
+    let k = Intrinsics::KINECT_V1;
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    for (i, (depth, t)) in frames.iter().enumerate() {
+        let shifted: Vec<u16> = depth
+            .iter()
+            .map(|&d| if d == 0 { 0 } else { d + shift_mm })
+            .collect();
+        let depth = if i == 0 { &shifted } else { depth };
+        clock.set(*t);
+        tracker.process(&frame(depth, *t, i as u32), None, &clock);
+        if tracker.state() != TrackerState::Initialising {
+            return (i, *tracker.bed().expect("a bed once initialised"));
+        }
+    }
+    panic!("the init phase did not end");
+}
+
+#[test]
+fn a_first_frames_bed_that_the_next_frames_outvote_is_replaced() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let first = TrackerConfig {
+        bed_frames: 1,
+        ..config(&seq)
+    };
+    let voted = TrackerConfig {
+        bed_frames: 5,
+        ..first
+    };
+    let (init_true, bed_true) = init_with_first_frame_shifted(&models, voted, &frames, 0);
+    let (init_first, _) = init_with_first_frame_shifted(&models, first, &frames, 0);
+    assert_eq!(
+        init_true, init_first,
+        "the demo's beds agree: the vote changes nothing"
+    );
+    // Frame 0 seen 15 cm farther: its mattress lies 15 cm low, the next four frames' where it is.
+    let (init_kept, bed_kept) = init_with_first_frame_shifted(&models, first, &frames, 150);
+    let (init_voted, bed_voted) = init_with_first_frame_shifted(&models, voted, &frames, 150);
+    let centre = bed_true.volume.bed_from_camera.inverse() * supine_core::geometry::Point3::origin();
+    let off = |b: &supine_core::planes::BedScene| b.mattress.signed_distance(&centre);
+    assert!(off(&bed_kept) > 0.1, "one frame's bed kept: {} m", off(&bed_kept));
+    assert!(off(&bed_voted).abs() < 0.02, "voted: {} m", off(&bed_voted));
+    assert_eq!(init_kept, init_first);
+    assert_eq!(
+        init_voted,
+        init_first + (voted.bed_frames as usize - 1),
+        "the shape frames start again with the voted bed"
+    );
+}
+
 /// The init phase's shape and the shape after `lock_refits` refits in `rounds` rounds (with `bed`, the refits' bed
 /// contact) on the demo's first `n` frames, as distances (σ units, all 20 coefficients) to the recording's true
 /// shape, and the body-shape revisions sent.

@@ -40,6 +40,7 @@
 
 pub mod accuracy;
 pub mod bed_search;
+pub mod bed_vote;
 pub mod budget;
 pub mod state;
 pub mod surface;
@@ -121,6 +122,16 @@ pub struct TrackerConfig {
     /// 10.96 -> 11.58 and 15.34 -> 15.83 mm and fewer frames tracked (0.979 -> 0.975, 0.986 -> 0.975), the init
     /// shape's rigid floor unchanged (9.2-9.5 mm): the frames' forest points err alike, so more of them add little.
     pub shape_frames: u16,
+    /// Frames whose bed estimates the init phase votes on ([`bed_vote`]; at most [`MAX_BED_FRAMES`]): the first bed
+    /// found serves the shape frames, and when the vote over the first `bed_frames` frames tried replaces it the
+    /// shape frames start again. 1 (the first bed found is kept): measured on 2026-12-05 at 5, the vote made the bed
+    /// right more often (of the 634 sequences of the choice sets and the seen held-out sets 40001-42096, 25 first
+    /// beds were wrong, 17 voted ones: a mattress > 30 mm off, a raised section missed or > 5° off) but tracking no
+    /// better: 146 validation sequences torso 10.31 -> 10.31 mm, 70001-70200 12.54 -> 12.58 mm (probe 12.66 ->
+    /// 12.63), and of the 11 sequences tracked both ways whose bed it changed 2 gained and 4 lost more than 1 mm
+    /// (s70109's section 26° -> 33°, the truth: 10.3 -> 19.0 mm); two never acquired sequences were then tracked,
+    /// 42 and 72 mm off (docs/tracking.md, twenty-fourth round).
+    pub bed_frames: u8,
     /// How the init phase combines its frames' shape estimates: the mean. The per-coefficient median (the shape
     /// evaluation's multi-frame estimate) was measured on 2026-12-05 and left the init shape's rigid floor as it was
     /// (9.19 -> 9.12 mm on the 146 validation sequences; torso 12.22 -> 12.46 mm there, 15.91 -> 15.33 mm on 100
@@ -265,6 +276,7 @@ impl Default for TrackerConfig {
             variant: Variant::ForestIcpFeedback,
             budget: BudgetConfig::default(),
             shape_frames: 10,
+            bed_frames: 1,
             shape_combine: ShapeCombine::Mean,
             refine_shape: true,
             shape_point_features: false,
@@ -430,6 +442,9 @@ pub struct FrameReport {
 #[derive(Debug, Clone, Copy)]
 struct Init {
     bed: Option<BedScene>,
+    /// The bed estimates so far while the bed is voted on (`None`: a frame without one), and the frames tried.
+    beds: [Option<BedScene>; MAX_BED_FRAMES],
+    bed_tries: u8,
     /// The init frames' shape estimates so far, and how many.
     shape_views: [[f32; SHAPE_COMPONENTS]; MAX_SHAPE_FRAMES],
     shape_n: u16,
@@ -456,6 +471,8 @@ impl Init {
     const fn new() -> Self {
         Init {
             bed: None,
+            beds: [None; MAX_BED_FRAMES],
+            bed_tries: 0,
             shape_views: [[0.0; SHAPE_COMPONENTS]; MAX_SHAPE_FRAMES],
             shape_n: 0,
             refits_left: 0,
@@ -527,6 +544,9 @@ fn mm(p: &Point3) -> [i32; 3] {
 fn quat_q14(q: &UnitQuaternion) -> UnitQuatQ14 {
     UnitQuatQ14::from_f32([q.w, q.i, q.j, q.k]).unwrap_or(UnitQuatQ14::IDENTITY)
 }
+
+/// Most frames whose bed estimates the init phase can vote on ([`TrackerConfig::bed_frames`]).
+pub const MAX_BED_FRAMES: usize = 8;
 
 /// Highest hip centre above the mattress a lying patient has, metres (the pelvis is 10-20 cm thick).
 const MAX_HIP_HEIGHT_M: f32 = 0.3;
@@ -888,32 +908,19 @@ impl<'m, 's> Tracker<'m, 's> {
         watch: &mut Stopwatch,
         report: &mut FrameReport,
     ) {
-        let bed = match self.init.bed {
-            Some(b) => b,
-            None => {
-                let mut cfg = self.cfg.planes;
-                cfg.seed = mix_seed(cfg.seed ^ self.cfg.seed, self.frames as u64);
-                match planes::estimate_bed(
-                    frame,
-                    &self.k,
-                    &cfg,
-                    self.cfg.up_camera.as_ref(),
-                    self.scratch.plane_points,
-                    self.scratch.plane_labels,
-                ) {
-                    Ok(b) => {
-                        self.init.bed = Some(b);
-                        b
-                    }
-                    Err(_) => {
-                        watch.lap(clock, Stage::Init);
-                        return;
-                    }
-                }
-            }
+        let wanted = self.cfg.bed_frames.clamp(1, MAX_BED_FRAMES as u8);
+        if self.init.bed.is_none() || self.init.bed_tries < wanted {
+            self.vote_bed(frame, wanted);
+        }
+        let Some(bed) = self.init.bed else {
+            watch.lap(clock, Stage::Init);
+            return;
         };
+        let voted = self.init.bed_tries >= wanted;
         if let Some(z) = self.cfg.known_shape {
-            self.finish_init(frame, &bed, None, z, clock, watch);
+            if voted {
+                self.finish_init(frame, &bed, None, z, clock, watch);
+            }
             watch.lap(clock, Stage::Init);
             return;
         }
@@ -933,7 +940,7 @@ impl<'m, 's> Tracker<'m, 's> {
             self.init.shape_n += 1;
         }
         let frames = self.cfg.shape_frames.clamp(1, MAX_SHAPE_FRAMES as u16);
-        if self.init.shape_n >= frames {
+        if self.init.shape_n >= frames && voted {
             let z = self
                 .cfg
                 .shape_combine
@@ -941,6 +948,39 @@ impl<'m, 's> Tracker<'m, 's> {
             self.finish_init(frame, &bed, Some(&observed), z, clock, watch);
         }
         watch.lap(clock, Stage::Init);
+    }
+
+    /// One frame's bed estimate for the init phase: the first bed found is the init phase's; when the
+    /// `wanted`-th frame has been tried the estimates so far are voted on ([`bed_vote`]), and a bed that differs from
+    /// the one in use replaces it and restarts the shape frames (their forest points were clipped by the other bed).
+    fn vote_bed(&mut self, frame: &DepthFrame<'_>, wanted: u8) {
+        let mut cfg = self.cfg.planes;
+        cfg.seed = mix_seed(cfg.seed ^ self.cfg.seed, self.frames as u64);
+        let found = planes::estimate_bed(
+            frame,
+            &self.k,
+            &cfg,
+            self.cfg.up_camera.as_ref(),
+            self.scratch.plane_points,
+            self.scratch.plane_labels,
+        )
+        .ok();
+        // Past the last slot (only while no frame has found a bed) the newest frame's estimate takes it.
+        let slot = (self.init.bed_tries as usize).min(MAX_BED_FRAMES - 1);
+        self.init.beds[slot] = found;
+        self.init.bed_tries = self.init.bed_tries.saturating_add(1);
+        if self.init.bed.is_none() {
+            self.init.bed = found;
+        }
+        if self.init.bed_tries != wanted || wanted == 1 {
+            return;
+        }
+        let beds: heapless::Vec<BedScene, MAX_BED_FRAMES> =
+            self.init.beds.iter().flatten().copied().collect();
+        if let Some(b) = self.init.bed.and_then(|used| bed_vote::replacement(&beds, &used)) {
+            self.init.bed = Some(b);
+            self.init.shape_n = 0;
+        }
     }
 
     fn finish_init(

@@ -85,6 +85,9 @@ pub struct TrackingEvalArgs {
     /// torso pose starts the first acquisition and counts as its first consistent frame.
     #[arg(long, value_name = "true|false")]
     pub acquire_from_init: Option<bool>,
+    /// The tracker's `bed_frames` (default: the tracker's): frames whose bed estimates the init phase votes on.
+    #[arg(long, value_name = "N")]
+    pub bed_frames: Option<u8>,
     /// The tracker's `follow_occluded` (default: the tracker's, on since 2026-12-03's seventh round): while the
     /// torso is mostly hidden, the pose follows fits from the temporal start that pass the acquisition's floors
     /// instead of coasting.
@@ -367,6 +370,9 @@ pub fn run_variant(
     cfg.search_shape_start = args.search_shape_start;
     if let Some(a) = args.acquire_from_init {
         cfg.acquire_from_init = a;
+    }
+    if let Some(n) = args.bed_frames {
+        cfg.bed_frames = n;
     }
     if let Some(f) = args.follow_occluded {
         cfg.icp.follow_occluded = f;
