@@ -7,7 +7,8 @@
 //! plane's (`flat a/t`, the one-surface test), and the points within the plane's inlier band at the found mattress
 //! (the hinge test).
 //!
-//! `cargo run --release -p supine-models --example bed_on_sequences -- SEQ_DIR_OR_PARENT [FRAMES]`
+//! `cargo run --release -p supine-models --example bed_on_sequences -- SEQ_DIR_OR_PARENT [FRAMES [TRACKER_SEED]]`
+//! (`TRACKER_SEED`: the tracker's `seed`, its default when left out).
 //! Cost: per sequence and frame one plane search (a few ms) and a few passes over its 8 k points.
 
 use anyhow::{Context, Result, bail};
@@ -111,9 +112,13 @@ fn describe_planes(
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(root) = args.first() else {
-        bail!("usage: bed_on_sequences SEQ_DIR_OR_PARENT [FRAMES]");
+        bail!("usage: bed_on_sequences SEQ_DIR_OR_PARENT [FRAMES [TRACKER_SEED]]");
     };
     let frames: u64 = args.get(1).map_or(Ok(1), |s| s.parse()).context("FRAMES")?;
+    let tracker_seed: u64 = args
+        .get(2)
+        .map_or(Ok(TrackerConfig::default().seed), |s| s.parse())
+        .context("TRACKER_SEED")?;
     let k = Intrinsics::KINECT_V1;
     for dir in sequence_dirs(&PathBuf::from(root))? {
         let seq = TrackingTruth::load(&dir)?;
@@ -138,7 +143,7 @@ fn main() -> Result<()> {
                 .map_err(|e| anyhow::anyhow!("{}: {e}", dir.display()))?;
             // The tracker's draw: its seed mixed with the frame count.
             let mut cfg = PlaneConfig::default();
-            cfg.seed = mix_seed(cfg.seed ^ TrackerConfig::default().seed, f);
+            cfg.seed = mix_seed(cfg.seed ^ tracker_seed, f);
             let n = planes::scratch_points(k.width as usize, k.height as usize, cfg.stride.max(1) as usize);
             let mut pts = vec![Point3::origin(); n];
             let mut labels = vec![0u8; n];

@@ -246,13 +246,11 @@ fn a_first_frames_bed_that_the_next_frames_outvote_is_replaced() {
     let models = bytes.views().unwrap();
     let seq = SequenceData::load(&demo_dir()).unwrap();
     let frames = frames();
+    let voted = config(&seq);
+    assert!(voted.bed_frames > 1, "the default votes");
     let first = TrackerConfig {
         bed_frames: 1,
-        ..config(&seq)
-    };
-    let voted = TrackerConfig {
-        bed_frames: 5,
-        ..first
+        ..voted
     };
     let (init_true, bed_true) = init_with_first_frame_shifted(&models, voted, &frames, 0);
     let (init_first, _) = init_with_first_frame_shifted(&models, first, &frames, 0);

@@ -124,13 +124,14 @@ pub struct TrackerConfig {
     pub shape_frames: u16,
     /// Frames whose bed estimates the init phase votes on ([`bed_vote`]; at most [`MAX_BED_FRAMES`]): the first bed
     /// found serves the shape frames, and when the vote over the first `bed_frames` frames tried replaces it the
-    /// shape frames start again. 1 (the first bed found is kept): measured on 2026-12-05 at 5, the vote made the bed
-    /// right more often (of the 634 sequences of the choice sets and the seen held-out sets 40001-42096, 25 first
-    /// beds were wrong, 17 voted ones: a mattress > 30 mm off, a raised section missed or > 5° off) but tracking no
-    /// better: 146 validation sequences torso 10.31 -> 10.31 mm, 70001-70200 12.54 -> 12.58 mm (probe 12.66 ->
-    /// 12.63), and of the 11 sequences tracked both ways whose bed it changed 2 gained and 4 lost more than 1 mm
-    /// (s70109's section 26° -> 33°, the truth: 10.3 -> 19.0 mm); two never acquired sequences were then tracked,
-    /// 42 and 72 mm off (docs/tracking.md, twenty-fourth round).
+    /// shape frames start again (1: the first bed found is kept). 5 since 2026-12-05: of the 634 sequences of the
+    /// choice sets and the seen held-out sets 40001-42096, under the tracker's seed and two others, 76 first beds
+    /// were wrong and 52 voted ones (a mattress > 30 mm off, a raised section missed or > 5° off). With the
+    /// tracker's seed, which 23 rounds of bed rules were tuned on, the choice sets' figures barely moved (146
+    /// validation sequences torso 10.31 -> 10.31 mm, 70001-70200 12.54 -> 12.58 mm); under seeds 1 and 2 a first
+    /// bed 78 or 218 mm off put a whole sequence 0.5-0.6 m off (s29009 616 mm, s70105 502 mm), and the vote took
+    /// the means over the three seeds from 12.07 to 10.68 mm (validation) and 13.10 to 12.26 mm (70001-70200)
+    /// (docs/tracking.md, twenty-fourth round).
     pub bed_frames: u8,
     /// How the init phase combines its frames' shape estimates: the mean. The per-coefficient median (the shape
     /// evaluation's multi-frame estimate) was measured on 2026-12-05 and left the init shape's rigid floor as it was
@@ -276,7 +277,7 @@ impl Default for TrackerConfig {
             variant: Variant::ForestIcpFeedback,
             budget: BudgetConfig::default(),
             shape_frames: 10,
-            bed_frames: 1,
+            bed_frames: 5,
             shape_combine: ShapeCombine::Mean,
             refine_shape: true,
             shape_point_features: false,

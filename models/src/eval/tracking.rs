@@ -85,6 +85,10 @@ pub struct TrackingEvalArgs {
     /// torso pose starts the first acquisition and counts as its first consistent frame.
     #[arg(long, value_name = "true|false")]
     pub acquire_from_init: Option<bool>,
+    /// The tracker's `seed` (default: the tracker's): its RANSAC and forest pixel draws. Another seed re-draws what
+    /// depends on them, which measures how much of a difference between two runs is the draw's.
+    #[arg(long, value_name = "S")]
+    pub tracker_seed: Option<u64>,
     /// The tracker's `bed_frames` (default: the tracker's): frames whose bed estimates the init phase votes on.
     #[arg(long, value_name = "N")]
     pub bed_frames: Option<u8>,
@@ -373,6 +377,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.bed_frames {
         cfg.bed_frames = n;
+    }
+    if let Some(seed) = args.tracker_seed {
+        cfg.seed = seed;
     }
     if let Some(f) = args.follow_occluded {
         cfg.icp.follow_occluded = f;
