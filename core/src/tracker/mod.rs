@@ -124,14 +124,13 @@ pub struct TrackerConfig {
     pub shape_frames: u16,
     /// Frames whose bed estimates the init phase votes on ([`bed_vote`]; at most [`MAX_BED_FRAMES`]): the first bed
     /// found serves the shape frames, and when the vote over the first `bed_frames` frames tried replaces it the
-    /// shape frames start again (1: the first bed found is kept). 5 since 2026-12-05: of the 634 sequences of the
-    /// choice sets and the seen held-out sets 40001-42096, under the tracker's seed and two others, 76 first beds
-    /// were wrong and 52 voted ones (a mattress > 30 mm off, a raised section missed or > 5° off). With the
-    /// tracker's seed, which 23 rounds of bed rules were tuned on, the choice sets' figures barely moved (146
-    /// validation sequences torso 10.31 -> 10.31 mm, 70001-70200 12.54 -> 12.58 mm); under seeds 1 and 2 a first
-    /// bed 78 or 218 mm off put a whole sequence 0.5-0.6 m off (s29009 616 mm, s70105 502 mm), and the vote took
-    /// the means over the three seeds from 12.07 to 10.68 mm (validation) and 13.10 to 12.26 mm (70001-70200)
-    /// (docs/tracking.md, twenty-fourth round).
+    /// shape frames start again (1: the first bed found is kept). 5 since 2026-12-05: under the tracker's seed,
+    /// which the earlier rounds' bed rules were tuned on, the choice sets barely moved (146 validation sequences
+    /// torso 10.31 -> 10.31 mm, 70001-70200 12.54 -> 12.58 mm); under seeds 1 and 2 a first bed 78 or 218 mm off put
+    /// a whole sequence 0.5-0.6 m off (s29009 616 mm, s70105 502 mm), and over the three seeds the vote took the
+    /// torso means from 12.07 to 10.68 mm and 13.10 to 12.26 mm (probe 12.85 -> 11.34, 13.14 -> 11.81 mm); fresh
+    /// held-out 43001-43096, three seeds: 13.18 -> 13.13 mm, tracked 96.42 -> 96.77 % (docs/tracking.md,
+    /// twenty-fourth round).
     pub bed_frames: u8,
     /// How the init phase combines its frames' shape estimates: the mean. The per-coefficient median (the shape
     /// evaluation's multi-frame estimate) was measured on 2026-12-05 and left the init shape's rigid floor as it was
