@@ -1,8 +1,9 @@
 //! The real-time tracker (paper Fig. 1) as one allocation-free loop: `Tracker::process(frame, arm, clock)`.
 //!
 //! Init phase (state `initialising`, first frames with the patient still): the bed's planes and volume of interest
-//! ([`crate::planes`]) from the first frame; then the joint forest's points and the subspace shape estimate on each
-//! of `shape_frames` frames, averaged; then one refinement by model fitting ([`crate::fit`], Eq. 7) unless the
+//! ([`crate::planes`]) from the first frame, voted over the first `bed_frames` ([`bed_vote`]: a voted bed that differs
+//! restarts the shape frames); then the joint forest's points and the subspace shape estimate on each of
+//! `shape_frames` frames, averaged; then one refinement by model fitting ([`crate::fit`], Eq. 7) unless the
 //! budget forbids it; then the shaped torso model ([`crate::torso`]) built once into the caller's buffers.
 //!
 //! Per frame after init: the forest's six points (with a Gaussian prior around the last refined points in the
