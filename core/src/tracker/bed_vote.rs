@@ -1,9 +1,9 @@
 //! The init phase's bed from the estimates of its first frames: one frame's RANSAC can take another plane for the
 //! mattress (the bed's base under a raised section, 0.16 m low) or miss a raised section, while the next frame's,
 //! drawn afresh, finds them (s42086: the mattress 163 mm low on frame 0, within 5 mm on five of the next six). The
-//! mattress most estimates agree on is kept, and with it a raised section when any of those estimates found one
-//! (a section is missed far more often than one is found on a flat bed). The tracker votes over its first five
-//! frames (`TrackerConfig::bed_frames`).
+//! mattress most estimates agree on is kept, and with it a raised section when at least two of those estimates
+//! place it alike (one frame can miss a section, or more rarely invent one on a flat bed). The tracker votes over
+//! its first five frames (`TrackerConfig::bed_frames`).
 //!
 //! Cost: a few plane comparisons per pair of estimates, once per init phase; nothing allocates.
 
