@@ -80,11 +80,11 @@ pub fn vote(beds: &[BedScene]) -> Option<usize> {
     let best = (0..beds.len()).rev().max_by_key(|&i| mattress_votes(i))?;
     let agreeing = |i: &usize| mattresses_agree(&beds[best], &beds[*i]);
     let with_section = |i: &usize| agreeing(i) && beds[*i].head_section.is_some();
+    // Only estimates with a section can agree on one.
     let section_votes = |i: usize| {
-        (0..beds.len())
-            .filter(with_section)
-            .filter(|&j| sections_agree(&beds[i], &beds[j]))
-            .count()
+        votes(beds, i, |a, b| {
+            mattresses_agree(&beds[best], b) && sections_agree(a, b)
+        })
     };
     let section = (0..beds.len())
         .rev()

@@ -973,7 +973,7 @@ impl<'m, 's> Tracker<'m, 's> {
         if self.init.bed.is_none() {
             self.init.bed = found;
         }
-        if self.init.bed_tries != wanted || wanted == 1 {
+        if self.init.bed_tries != wanted {
             return;
         }
         let beds: heapless::Vec<BedScene, MAX_BED_FRAMES> =
