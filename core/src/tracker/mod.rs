@@ -20,6 +20,9 @@
 //! frames agree on it; while tracking, a good fit from a start other than the temporal one that lands far from it
 //! is not trusted (the patient does not jump), unless the pose's own fit is not good and the far fit sees clearly
 //! more of the torso on two frames in a row: then the pose was a wrong lock ([`TorsoIcpConfig::switch_margin`]).
+//! When the pose's own fit sees a clear view of the torso that it does not match (enough of it seen, too little
+//! support), the frame looks again as an acquisition would, from the forest without the prior, and a far fit with
+//! clearly more support replaces the pose on two frames in a row ([`TorsoIcpConfig::clear_view_min_support`]).
 //! Pixels without depth over the torso count as hidden, so a torso under the arm's shadow coasts as occluded
 //! instead of being lost. While occluded, the pose follows a clean fit from the temporal start that stays near it,
 //! with that fit's rotation held where the little it sees does not fix it
@@ -37,7 +40,7 @@
 //! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
 //! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
 //! (20-40 µs each), probe mapping (tens of µs) and five packets; an acquiring frame adds the bed search's screening
-//! (0.5-1 ms) and up to six full fits.
+//! (0.5-1 ms) and up to six full fits, and a second look a second forest pass and three fits.
 
 pub mod accuracy;
 pub mod bed_search;
@@ -1454,8 +1457,20 @@ impl<'m, 's> Tracker<'m, 's> {
                     break;
                 }
             }
-            // A far fit that sees more of the torso than the pose's own, found at the same place on two frames in a
-            // row while the pose's fit is not good: the pose is a wrong lock whose fit calls the patient an occluder.
+            // The pose's own fit sees the torso clearly and does not match it: look again from the forest without
+            // the prior (which the pose pulls to itself) and its rolls, as an acquisition would.
+            if variant == Variant::ForestIcpFeedback
+                && icp_cfg.clear_view_min_support > 0.0
+                && switch.is_none()
+                && best.is_some_and(|(_, _, q, _)| q != FitQuality::Good)
+                && let (Some(p), Some(own)) = (prior_pose, temporal)
+                && own.clear_view_mismatch(&icp_cfg)
+            {
+                switch = self.second_look(frame, &t, &p, &own, &acquire_params, clock, watch);
+            }
+            // A far fit that sees more of the torso than the pose's own (or, from the second look, has more
+            // support), found at the same place on two frames in a row while the pose's fit is not good: the pose is
+            // a wrong lock whose fit calls the patient an occluder.
             let mut switched = false;
             match switch {
                 Some((pose, fit)) if best.is_some_and(|(_, _, q, _)| q != FitQuality::Good) => {
@@ -1561,6 +1576,63 @@ impl<'m, 's> Tracker<'m, 's> {
             report.probe = probe::map_tip(&surface, &tip);
             report.arm_age_us = Some(frame.capture.since(a.time));
         }
+    }
+
+    /// The second look of a pose `prior` whose own fit `own` is a clear-view mismatch
+    /// ([`TorsoIcpConfig::clear_view_min_support`]): the forest without the prior, its pose and that pose's two
+    /// rolls, each fitted as an acquisition (while the budget allows); the fit that [`TorsoFit::outsupports`] `own`
+    /// and lies on the bed with the most support. The bed search's starts are left out: with them the choice sets
+    /// gave the same figures at twice the cost. Cost: a second forest pass and three fits, on a wrong lock's frames
+    /// only (about 3 ms).
+    #[allow(clippy::too_many_arguments)] // the frame, the torso, the pose and its fit, the fit's settings, clock
+    fn second_look(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        t: &TorsoModel,
+        prior: &Isometry3,
+        own: &TorsoFit,
+        params: &icp::IcpParams,
+        clock: &(impl Clock + ?Sized),
+        watch: &Stopwatch,
+    ) -> Option<(Isometry3, TorsoFit)> {
+        let points = self.forest(frame, &t.bed, &[None; P]);
+        let f = forest_pose(&points, &t.salient_torso)?;
+        let mut starts: heapless::Vec<Isometry3, 3> = heapless::Vec::new();
+        let _ = starts.push(f);
+        for roll in ACQUIRE_ROLLS_RAD {
+            let _ = starts.push(f * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll));
+        }
+        let cfg = self.cfg.icp;
+        let mut found: Option<(Isometry3, TorsoFit)> = None;
+        for start in starts {
+            if !budget::iteration_fits(
+                &self.cfg.budget,
+                watch.elapsed(clock),
+                watch.times.of(Stage::Forest) / 4,
+            ) {
+                break;
+            }
+            let (pose, fit) = torso_icp::fit_torso(
+                frame,
+                &self.k,
+                self.scratch.torso_vertices,
+                self.scratch.torso_normals,
+                start,
+                &cfg,
+                params,
+                &self.cfg.budget,
+                cfg.acquire_min_iterations,
+                clock,
+                watch,
+            );
+            if lies_on_bed(&pose, &t.bed)
+                && fit.outsupports(&cfg, own, prior, &pose)
+                && found.is_none_or(|(_, b)| fit.support() > b.support())
+            {
+                found = Some((pose, fit));
+            }
+        }
+        found
     }
 
     /// The [`bed_search`] grid around the forest's pose `forest`, each start screened by a few ICP iterations

@@ -175,6 +175,13 @@ pub struct TrackingEvalArgs {
     /// 2026-12-05's twenty-second round).
     #[arg(long, value_parser = parse_visible_share)]
     pub switch_margin: Option<f32>,
+    /// The tracker's `icp.clear_view_min_support`: while tracking, a fit that sees enough of the torso but has
+    /// less support than this is failed (a wrong lock), not occluded (default: the tracker's; 0: off).
+    #[arg(long, value_parser = parse_visible_share)]
+    pub clear_view_support: Option<f32>,
+    /// The tracker's `icp.look_support_margin`: the support a second look's fit needs above the pose's own.
+    #[arg(long, value_parser = parse_visible_share)]
+    pub look_support_margin: Option<f32>,
     /// The tracker's frame budget, ms (the product's 33 by default). On a loaded machine the budget cuts ICP and
     /// acquisition starts, so the figures depend on the load; a large budget gives those of an idle head computer.
     #[arg(long, default_value_t = 33.0, value_parser = parse_budget_ms)]
@@ -300,8 +307,8 @@ pub struct FrameScore {
     pub fit_rms_mm: Option<f32>,
     /// Share of the front-facing torso model seen by the fit, 0..1.
     pub fit_visible: Option<f32>,
-    /// Pairs, inlier pairs, occluded and see-through points of the fit's last association.
-    pub fit_counts: Option<[usize; 4]>,
+    /// Pairs, inlier pairs, occluded, see-through and no-depth points of the fit's last association.
+    pub fit_counts: Option<[usize; 5]>,
     /// The forest's raw points against the truth, mean mm over the points it found.
     pub forest_point_mm: Option<f32>,
     /// Translation error of the frame's best fit (accepted or not) against the true torso frame, mm.
@@ -405,6 +412,12 @@ pub fn run_variant(
     }
     if let Some(m) = args.switch_margin {
         cfg.icp.switch_margin = m;
+    }
+    if let Some(m) = args.clear_view_support {
+        cfg.icp.clear_view_min_support = m;
+    }
+    if let Some(m) = args.look_support_margin {
+        cfg.icp.look_support_margin = m;
     }
     if let Some(n) = args.shape_frames {
         cfg.shape_frames = n;
@@ -515,7 +528,7 @@ pub fn run_variant(
             s.fit_rms_mm = Some(r.fit.association.rms_m() * 1000.0);
             s.fit_visible = Some(r.fit.visible);
             let a = &r.fit.association;
-            s.fit_counts = Some([a.pairs, a.inliers, a.occluded, a.see_through]);
+            s.fit_counts = Some([a.pairs, a.inliers, a.occluded, a.see_through, a.no_depth]);
         }
         if let Some(p) = r.fit_pose {
             let d = isometry_of(&t.camera_from_torso).inverse() * p;
