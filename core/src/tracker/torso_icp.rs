@@ -64,8 +64,8 @@ pub struct TorsoIcpConfig {
     /// acquisition would, and a fit of at least this support that has `look_support_margin` more than the pose's
     /// own replaces the pose on its second frame ([`TorsoFit::outsupports`]). 0.6 since 2026-12-05: such frames
     /// were 4 of 24 527 tracked within 12 mm on the choice sets and 225 of 1 062 tracked more than 30 mm off; over
-    /// three tracker seeds the look took the torso means from 10.68 to 10.47 mm (146 validation sequences) and 12.26
-    /// to 12.01 mm (70001-70200), the medians unchanged; fresh held-out 44001-44096 11.33 -> 11.09 mm
+    /// three tracker seeds the look took the torso means from 10.68 to 10.45 mm (146 validation sequences) and 12.26
+    /// to 12.01 mm (70001-70200), the medians unchanged; fresh held-out 44001-44096 11.33 -> 11.13 mm
     /// (docs/tracking.md, twenty-fifth round). Losing such a pose instead re-acquired one on the legs (s70129).
     pub clear_view_min_support: f32,
     /// How much more support than the pose's own fit a fit from the second look needs to replace it.

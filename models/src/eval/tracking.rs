@@ -175,8 +175,9 @@ pub struct TrackingEvalArgs {
     /// 2026-12-05's twenty-second round).
     #[arg(long, value_parser = parse_visible_share)]
     pub switch_margin: Option<f32>,
-    /// The tracker's `icp.clear_view_min_support`: while tracking, a fit that sees enough of the torso but has
-    /// less support than this is failed (a wrong lock), not occluded (default: the tracker's; 0: off).
+    /// The tracker's `icp.clear_view_min_support`: a pose whose own fit sees enough of the torso with less support
+    /// than this gets a second look from the forest without the prior (default: the tracker's, 0.6; 0: off, as
+    /// before 2026-12-05's twenty-fifth round).
     #[arg(long, value_parser = parse_visible_share)]
     pub clear_view_support: Option<f32>,
     /// The tracker's `icp.look_support_margin`: the support a second look's fit needs above the pose's own.
