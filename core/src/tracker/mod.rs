@@ -1393,11 +1393,8 @@ impl<'m, 's> Tracker<'m, 's> {
                 } else {
                     (&icp_cfg, &acquire_params)
                 };
-                let (pose, fit) = torso_icp::fit_torso(
+                let (pose, fit) = self.fit_model(
                     frame,
-                    &self.k,
-                    self.scratch.torso_vertices,
-                    self.scratch.torso_normals,
                     *start,
                     cfg_i,
                     params_i,
@@ -1612,11 +1609,8 @@ impl<'m, 's> Tracker<'m, 's> {
             ) {
                 break;
             }
-            let (pose, fit) = torso_icp::fit_torso(
+            let (pose, fit) = self.fit_model(
                 frame,
-                &self.k,
-                self.scratch.torso_vertices,
-                self.scratch.torso_normals,
                 start,
                 &cfg,
                 params,
@@ -1678,6 +1672,34 @@ impl<'m, 's> Tracker<'m, 's> {
         kept.iter().filter(|(s, _)| *s > 0.0).map(|(_, p)| *p).collect()
     }
 
+    /// [`torso_icp::fit_torso`] of the tracker's torso model from `start`.
+    #[allow(clippy::too_many_arguments)] // fit_torso's inputs that differ between the callers
+    fn fit_model(
+        &self,
+        frame: &DepthFrame<'_>,
+        start: Isometry3,
+        cfg: &TorsoIcpConfig,
+        params: &icp::IcpParams,
+        budget: &BudgetConfig,
+        min_iterations: u8,
+        clock: &(impl Clock + ?Sized),
+        watch: &Stopwatch,
+    ) -> (Isometry3, TorsoFit) {
+        torso_icp::fit_torso(
+            frame,
+            &self.k,
+            self.scratch.torso_vertices,
+            self.scratch.torso_normals,
+            start,
+            cfg,
+            params,
+            budget,
+            min_iterations,
+            clock,
+            watch,
+        )
+    }
+
     /// The torso fit from `start` and its support, when it has enough pairs and lies on the bed.
     #[allow(clippy::too_many_arguments)] // fit_torso's inputs that differ between the callers
     fn fit_lying(
@@ -1692,19 +1714,7 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) -> Option<(Isometry3, f32)> {
-        let (pose, fit) = torso_icp::fit_torso(
-            frame,
-            &self.k,
-            self.scratch.torso_vertices,
-            self.scratch.torso_normals,
-            start,
-            cfg,
-            params,
-            budget,
-            min_iterations,
-            clock,
-            watch,
-        );
+        let (pose, fit) = self.fit_model(frame, start, cfg, params, budget, min_iterations, clock, watch);
         let pairs = cfg.model_points(fit.association.pairs);
         (pairs >= cfg.min_pairs as usize && lies_on_bed(&pose, bed)).then(|| (pose, fit.support()))
     }
