@@ -62,8 +62,9 @@ pub struct TorsoIcpConfig {
     /// than this has a clear view that does not match it (0: off; [`TorsoFit::clear_view_mismatch`]): a wrong lock,
     /// not a torso behind the arm. The tracker then looks again from the forest without its prior, as an
     /// acquisition would, and a fit of at least this support that has `look_support_margin` more than the pose's
-    /// own replaces the pose on its second frame ([`TorsoFit::outsupports`]). 0.6 since 2026-12-05: such frames
-    /// were 4 of 24 527 tracked within 12 mm on the choice sets and 225 of 1 062 tracked more than 30 mm off; over
+    /// own replaces the pose on its second frame ([`TorsoFit::outsupports`]). 0.6 since 2026-12-05: of the choice
+    /// sets' frames whose fit saw 30 % or more, support under 0.6 marked 4 of 24 527 tracked within 12 mm and 225 of
+    /// 1 062 tracked more than 30 mm off; over
     /// three tracker seeds the look took the torso means from 10.68 to 10.45 mm (146 validation sequences) and 12.26
     /// to 12.01 mm (70001-70200), the medians unchanged; fresh held-out 44001-44096 11.33 -> 11.13 mm
     /// (docs/tracking.md, twenty-fifth round). Losing such a pose instead re-acquired one on the legs (s70129).
