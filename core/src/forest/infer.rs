@@ -39,6 +39,8 @@ pub struct Workspace {
     leaves: [[u32; MAX_TREES]; MAX_SAMPLES],
     order: [u16; MAX_SAMPLES],
     votes: VoteBuffer<MAX_VOTES>,
+    /// Samples of the last [`estimate`], which [`reestimate`] reads again.
+    last: usize,
 }
 
 impl Default for Workspace {
@@ -60,6 +62,7 @@ impl Workspace {
             leaves: [[0; MAX_TREES]; MAX_SAMPLES],
             order: [0; MAX_SAMPLES],
             votes: VoteBuffer::new(),
+            last: 0,
         }
     }
 
@@ -348,6 +351,19 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
         &mut ws.order,
         &mut ws.leaves[..n],
     );
+    ws.last = n;
+    reestimate(model, cfg.method, priors, ws)
+}
+
+/// The six points again from the last [`estimate`]'s samples and leaves in `ws`, with `priors` (which may differ
+/// from that estimate's): the votes and the mean-shift alone, no sampling or descent; [`estimate`]'s own last step.
+pub fn reestimate<M: ForestModel + ?Sized>(
+    model: &M,
+    method: Method,
+    priors: &[Option<Prior>; P],
+    ws: &mut Workspace,
+) -> [Option<PointEstimate>; P] {
+    let n = ws.last;
     let mut out = [None; P];
     let (samples, leaves, votes) = (&ws.samples[..n], &ws.leaves[..n], &mut ws.votes);
     for (point, slot) in out.iter_mut().enumerate() {
@@ -355,7 +371,7 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
         votes.clear();
         for_each_vote(
             model,
-            cfg.method,
+            method,
             point,
             samples.iter().map(|s| s.p),
             leaves,
@@ -363,7 +379,7 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
             |v| votes.push(v),
         );
         let pp = model.params(point);
-        let h = match cfg.method {
+        let h = match method {
             Method::Refined => pp.refined_bandwidth_m,
             Method::Baseline => pp.baseline_bandwidth_m,
         };

@@ -40,7 +40,7 @@
 //! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
 //! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
 //! (20-40 µs each), probe mapping (tens of µs) and five packets; an acquiring frame adds the bed search's screening
-//! (0.5-1 ms) and up to six full fits, and a second look a second forest pass and three fits.
+//! (0.5-1 ms) and up to six full fits, and a second look a second mean-shift and three fits.
 
 pub mod accuracy;
 pub mod bed_search;
@@ -1576,11 +1576,11 @@ impl<'m, 's> Tracker<'m, 's> {
     }
 
     /// The second look of a pose `prior` whose own fit `own` is a clear-view mismatch
-    /// ([`TorsoIcpConfig::clear_view_min_support`]): the forest without the prior, its pose and that pose's two
+    /// ([`TorsoIcpConfig::clear_view_min_support`]): the frame's forest votes without the prior, their pose and its two
     /// rolls, each fitted as an acquisition (while the budget allows); the fit that [`TorsoFit::outsupports`] `own`
     /// and lies on the bed with the most support. The bed search's starts are left out: with them the choice sets
-    /// gave the same figures at twice the cost. Cost: a second forest pass and three fits, on a wrong lock's frames
-    /// only (about 3 ms).
+    /// gave the same figures at twice the cost. Cost: a second mean-shift and three fits, on a wrong lock's frames
+    /// only.
     #[allow(clippy::too_many_arguments)] // the frame, the torso, the pose and its fit, the fit's settings, clock
     fn second_look(
         &mut self,
@@ -1592,7 +1592,13 @@ impl<'m, 's> Tracker<'m, 's> {
         clock: &(impl Clock + ?Sized),
         watch: &Stopwatch,
     ) -> Option<(Isometry3, TorsoFit)> {
-        let points = self.forest(frame, &t.bed, &[None; P]);
+        // The frame's forest pass left its samples and leaves in the workspace: only the mean-shift differs.
+        let points = infer::reestimate(
+            &self.models.joints,
+            Method::Refined,
+            &[None; P],
+            self.scratch.forest,
+        );
         let f = forest_pose(&points, &t.salient_torso)?;
         let mut starts: heapless::Vec<Isometry3, 3> = heapless::Vec::new();
         let _ = starts.push(f);
