@@ -593,6 +593,12 @@ const SUPPORT_FOLLOW: f32 = 0.02;
 /// Roll offsets tried when acquiring without a pose, radians.
 const ACQUIRE_ROLLS_RAD: [f32; 2] = [-0.35, 0.35];
 
+/// `pose` turned about the body's long axis by each of [`ACQUIRE_ROLLS_RAD`] (its roll is the forest's least
+/// certain part): the acquisition's and the second look's extra starts.
+fn rolled(pose: &Isometry3) -> [Isometry3; 2] {
+    ACQUIRE_ROLLS_RAD.map(|roll| pose * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll))
+}
+
 fn rank(q: FitQuality) -> u8 {
     match q {
         FitQuality::Good => 2,
@@ -1348,8 +1354,8 @@ impl<'m, 's> Tracker<'m, 's> {
             if let Some(f) = forest_pose {
                 let _ = starts.push(f);
                 if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
-                    for roll in ACQUIRE_ROLLS_RAD {
-                        let _ = starts.push(f * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll));
+                    for r in rolled(&f) {
+                        let _ = starts.push(r);
                     }
                 }
             }
@@ -1446,11 +1452,7 @@ impl<'m, 's> Tracker<'m, 's> {
                 if prior_pose.is_some() && (q == FitQuality::Good || (from_prior(i) && follows)) {
                     break;
                 }
-                if !budget::iteration_fits(
-                    &self.cfg.budget,
-                    watch.elapsed(clock),
-                    watch.times.of(Stage::Forest) / 4,
-                ) {
+                if !self.another_fit_fits(clock, watch) {
                     break;
                 }
             }
@@ -1600,19 +1602,11 @@ impl<'m, 's> Tracker<'m, 's> {
             self.scratch.forest,
         );
         let f = forest_pose(&points, &t.salient_torso)?;
-        let mut starts: heapless::Vec<Isometry3, 3> = heapless::Vec::new();
-        let _ = starts.push(f);
-        for roll in ACQUIRE_ROLLS_RAD {
-            let _ = starts.push(f * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll));
-        }
+        let [left, right] = rolled(&f);
         let cfg = self.cfg.icp;
         let mut found: Option<(Isometry3, TorsoFit)> = None;
-        for start in starts {
-            if !budget::iteration_fits(
-                &self.cfg.budget,
-                watch.elapsed(clock),
-                watch.times.of(Stage::Forest) / 4,
-            ) {
+        for start in [f, left, right] {
+            if !self.another_fit_fits(clock, watch) {
                 break;
             }
             let (pose, fit) = self.fit_model(
@@ -1657,11 +1651,7 @@ impl<'m, 's> Tracker<'m, 's> {
         let back = bed_search::back_depth_m(self.scratch.torso_vertices);
         let mut kept: [(f32, Isometry3); bed_search::KEEP] = [(0.0, Isometry3::identity()); bed_search::KEEP];
         for start in bed_search::grid_starts(forest, bed, back) {
-            if !budget::iteration_fits(
-                &self.cfg.budget,
-                watch.elapsed(clock),
-                watch.times.of(Stage::Forest) / 4,
-            ) {
+            if !self.another_fit_fits(clock, watch) {
                 break;
             }
             let iterations = bed_search::SCREEN_ITERATIONS;
@@ -1676,6 +1666,16 @@ impl<'m, 's> Tracker<'m, 's> {
             }
         }
         kept.iter().filter(|(s, _)| *s > 0.0).map(|(_, p)| *p).collect()
+    }
+
+    /// Whether the frame's budget leaves room for one more start's fit (the time left against a quarter of the
+    /// forest stage's): the frame's starts, the bed search's screening and the second look all ask it.
+    fn another_fit_fits(&self, clock: &(impl Clock + ?Sized), watch: &Stopwatch) -> bool {
+        budget::iteration_fits(
+            &self.cfg.budget,
+            watch.elapsed(clock),
+            watch.times.of(Stage::Forest) / 4,
+        )
     }
 
     /// [`torso_icp::fit_torso`] of the tracker's torso model from `start`.
