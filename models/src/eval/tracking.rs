@@ -304,6 +304,10 @@ pub struct FrameScore {
     pub stage_ms: [f32; 4],
     /// True occluded fraction of the torso.
     pub occluded: f32,
+    /// True share of the torso the arm hides from the sensor, its projector shadow included (sequences of
+    /// 2026-12-06 on: `torso_unseen_fraction` in the truth).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub unseen: Option<f32>,
     /// RMS point-to-plane residual of the frame's torso fit, mm (frames where a fit ran).
     pub fit_rms_mm: Option<f32>,
     /// Share of the front-facing torso model seen by the fit, 0..1.
@@ -523,6 +527,7 @@ pub fn run_variant(
             ms: r.times.total() as f32 / 1000.0,
             stage_ms: Stage::ALL.map(|st| r.times.of(st) as f32 / 1000.0),
             occluded: t.torso_occluded_fraction,
+            unseen: t.torso_unseen_fraction,
             ..FrameScore::default()
         };
         if r.fit.iterations > 0 {

@@ -433,6 +433,52 @@ impl KinectNoise {
         }
     }
 
+    /// Step 1 alone: `unlit` (resized to the image, `false` outside `rows`) marks the pixels of `rows` the projector
+    /// cannot light (with the registration's occlusion and `min_shadow_px`), deterministic (no random draw).
+    pub fn mark_unlit(
+        &self,
+        buf: &RenderBuffers,
+        intrinsics: &Intrinsics,
+        rows: std::ops::Range<usize>,
+        unlit: &mut Vec<bool>,
+    ) {
+        let w = buf.width;
+        unlit.clear();
+        unlit.resize(w * buf.height, false);
+        // Projector disparity uses the render's focal length so that shadows line up with the rendered geometry.
+        // Registered, the view is the RGB camera's, nearer to the projector by its baseline.
+        let fbp = match self.registration {
+            Some(r) => intrinsics.fx * (self.baseline_m - r.rgb_baseline_m),
+            None => intrinsics.fx * self.baseline_m,
+        };
+        for v in rows {
+            let row = v * w;
+            if self.projector_shadow {
+                // Right-to-left over the full row: occluders right of the band still cast shadows into it.
+                let mut min_up = f32::INFINITY;
+                for u in (0..w).rev() {
+                    let iz = buf.inv_z[row + u];
+                    if iz <= 0.0 {
+                        continue;
+                    }
+                    let up = u as f32 - fbp * iz;
+                    // A quarter-pixel tolerance keeps steep but lit surfaces (u_p barely monotonic) lit.
+                    if up > min_up + 0.25 {
+                        unlit[row + u] = true;
+                    } else {
+                        min_up = min_up.min(up);
+                    }
+                }
+            }
+            if let Some(r) = self.registration {
+                mark_left_occlusion(buf, v, intrinsics.fx * r.rgb_baseline_m, unlit);
+            }
+            if self.min_shadow_px > 1 {
+                clear_short_runs(&mut unlit[row..row + w], self.min_shadow_px as usize);
+            }
+        }
+    }
+
     /// Write the noisy depth (mm, 0 = invalid) of `rect` into `out` (row-major `rect.w * rect.h`), from the clean
     /// render `buf` seen through `intrinsics`, with the random stream fixed by `seed`.
     pub fn apply(
@@ -514,42 +560,12 @@ impl KinectNoise {
         const PAD: usize = 4;
         let (px0, py0) = (rx0.saturating_sub(PAD), ry0.saturating_sub(PAD));
         let (px1, py1) = ((rx0 + rw + PAD).min(w), (ry0 + rh + PAD).min(h));
-        scratch.shadow.clear();
-        scratch.shadow.resize(w * h, false);
         scratch.cos_theta.clear();
         scratch.cos_theta.resize(w * h, 1.0);
         self.fill_tables(scratch);
-        // Projector disparity uses the render's focal length so that shadows line up with the rendered geometry.
-        // Registered, the view is the RGB camera's, nearer to the projector by its baseline.
-        let fbp = match self.registration {
-            Some(r) => intrinsics.fx * (self.baseline_m - r.rgb_baseline_m),
-            None => intrinsics.fx * self.baseline_m,
-        };
+        self.mark_unlit(buf, intrinsics, py0..py1, &mut scratch.shadow);
         for v in py0..py1 {
             let row = v * w;
-            if self.projector_shadow {
-                // Right-to-left over the full row: occluders right of the band still cast shadows into it.
-                let mut min_up = f32::INFINITY;
-                for u in (0..w).rev() {
-                    let iz = buf.inv_z[row + u];
-                    if iz <= 0.0 {
-                        continue;
-                    }
-                    let up = u as f32 - fbp * iz;
-                    // A quarter-pixel tolerance keeps steep but lit surfaces (u_p barely monotonic) lit.
-                    if up > min_up + 0.25 {
-                        scratch.shadow[row + u] = true;
-                    } else {
-                        min_up = min_up.min(up);
-                    }
-                }
-            }
-            if let Some(r) = self.registration {
-                mark_left_occlusion(buf, v, intrinsics.fx * r.rgb_baseline_m, &mut scratch.shadow);
-            }
-            if self.min_shadow_px > 1 {
-                clear_short_runs(&mut scratch.shadow[row..row + w], self.min_shadow_px as usize);
-            }
             let ray_y = (v as f32 - intrinsics.cy) / intrinsics.fy;
             for u in px0..px1 {
                 let t = buf.triangle[row + u];
@@ -1073,6 +1089,38 @@ mod tests {
         assert!(
             row[left_edge + 5] > 0 && row[600] > 0 && row[400] > 0,
             "box and wall measured elsewhere"
+        );
+    }
+
+    #[test]
+    fn the_unlit_mask_is_the_band_the_noisy_image_loses() {
+        let r = box_render();
+        let quiet = KinectNoise {
+            lateral_px: 0.0,
+            ..KinectNoise::default()
+        };
+        let mut unlit = Vec::new();
+        quiet.mark_unlit(r.buffers(), &Intrinsics::KINECT_V1, 0..480, &mut unlit);
+        let row = &unlit[240 * 640..241 * 640];
+        let left_edge = 320 - (0.1 * 571.401f32 / 1.5) as usize;
+        let band: Vec<usize> = (0..640).filter(|&u| row[u]).collect();
+        let expected = (571.401f32 * 0.075 * (1.0 / 1.5 - 1.0 / 2.0)).round() as usize;
+        assert!(
+            band.len().abs_diff(expected) <= 1 && band.iter().all(|&u| u < left_edge && u + 10 > left_edge),
+            "unlit {band:?}, expected {expected} px left of {left_edge}"
+        );
+        let img = noisy(&r, &quiet, 9);
+        assert!(
+            unlit.iter().zip(&img).all(|(&u, &d)| !u || d == 0),
+            "every unlit pixel reads no depth"
+        );
+        let mut rows = Vec::new();
+        quiet.mark_unlit(r.buffers(), &Intrinsics::KINECT_V1, 240..241, &mut rows);
+        assert_eq!(&rows[240 * 640..241 * 640], row);
+        assert_eq!(
+            rows.iter().filter(|&&u| u).count(),
+            band.len(),
+            "other rows untouched"
         );
     }
 

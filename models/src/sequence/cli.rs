@@ -25,6 +25,10 @@ pub struct SequenceArgs {
     /// for byte; 1 reproduces earlier versions for every seed.
     #[arg(long, default_value_t = 0.5, value_parser = share)]
     pub sweep_max_occluded: f32,
+    /// Whether --sweep-max-occluded counts the torso the arm's projector shadow hides beside what the arm covers
+    /// (what the sensor loses; `false`: only what it covers, as versions before 2026-12-06 did).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set, value_name = "BOOL")]
+    pub sweep_limit_shadow: bool,
     /// The arm parks between the head and the whole torso for about 1 s (30 frames, under ~10 % of the torso left
     /// visible), then leaves; the frame range goes into DIR/sequence.json.
     #[arg(long, conflicts_with = "calibration")]
@@ -175,6 +179,7 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
         motion: args.motion.map(|m| m.resolve(args.seed)),
         sweep_max_occluded: (args.occluder && args.sweep_max_occluded < 1.0)
             .then_some(args.sweep_max_occluded),
+        sweep_limit_counts_shadow: args.sweep_limit_shadow,
         noise: if let Some(path) = &args.noise {
             crate::render::noise::KinectNoise::from_file(path)?
         } else if args.legacy_noise {
@@ -207,9 +212,14 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     );
     if let Some(planned) = summary.sweep_occluded_planned {
         eprintln!(
-            "arm placed so its sweep hides {:.0} % of the torso at most on the first frame (limit {:.0} %)",
+            "arm placed so its sweep hides {:.0} % of the torso at most on the first frame (limit {:.0} %{})",
             100.0 * planned,
-            100.0 * args.sweep_max_occluded
+            100.0 * args.sweep_max_occluded,
+            if args.sweep_limit_shadow {
+                ", its projector shadow counted"
+            } else {
+                ""
+            }
         );
     }
     if let Some(o) = summary.episodes.full_occlusion {
@@ -269,6 +279,12 @@ mod tests {
                 .unwrap()
                 .sweep_max_occluded,
             0.4
+        );
+        assert!(parse(&["--out", "d", "--occluder"]).unwrap().sweep_limit_shadow);
+        assert!(
+            !parse(&["--out", "d", "--occluder", "--sweep-limit-shadow", "false"])
+                .unwrap()
+                .sweep_limit_shadow
         );
         for bad in ["0", "1.5", "half"] {
             let e = parse(&["--out", "d", "--sweep-max-occluded", bad])

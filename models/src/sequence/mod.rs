@@ -76,6 +76,10 @@ pub struct SequenceConfig {
     /// extremes; the robot's shoulder is moved until it holds); `None`: no check, the shoulder of earlier versions.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sweep_max_occluded: Option<f32>,
+    /// Whether that share counts the torso the arm's projector shadow hides as well as what it covers (what the
+    /// sensor loses; `false` in files of earlier versions, which counted only what it covers).
+    #[serde(default)]
+    pub sweep_limit_counts_shadow: bool,
 }
 
 impl SequenceConfig {
@@ -94,6 +98,7 @@ impl SequenceConfig {
             motion: None,
             episode_frames: EpisodeFrames::default(),
             sweep_max_occluded: None,
+            sweep_limit_counts_shadow: true,
         }
     }
 }
@@ -171,6 +176,10 @@ pub struct FrameTruth {
     pub torso_occluded_fraction: f32,
     /// Fraction of all visible body pixels hidden by the arm.
     pub body_occluded_fraction: f32,
+    /// Fraction of the torso pixels the projector lights without the arm that the arm hides from the sensor: in
+    /// front of them or casting the projector's shadow over them (absent in files of earlier versions).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub torso_unseen_fraction: Option<f32>,
     /// Current breathing rise of the chest front, mm.
     pub breathing_mm: f32,
     /// Arm-motion blend parameter (0..1) of the body pose.
@@ -201,6 +210,33 @@ pub struct SequenceSummary {
 const SHOULDER_CANDIDATES: usize = 12;
 
 /// Torso and whole-body pixels in the renderer's last image.
+/// Torso pixels of the render the projector lights (what the sensor can return depth for); `unlit` is scratch.
+fn lit_torso_pixels(
+    r: &Renderer,
+    noise: &KinectNoise,
+    k: &Intrinsics,
+    is_torso: &dyn Fn(u8) -> bool,
+    unlit: &mut Vec<bool>,
+) -> usize {
+    let b = r.buffers();
+    noise.mark_unlit(b, k, 0..b.height, unlit);
+    b.label
+        .iter()
+        .zip(&b.part)
+        .zip(unlit.iter())
+        .filter(|((l, p), u)| **l == Label::Body as u8 && is_torso(**p) && !**u)
+        .count()
+}
+
+/// `1 − after/before` (0 when nothing was there before).
+fn hidden_share(before: usize, after: usize) -> f32 {
+    if before > 0 {
+        1.0 - after as f32 / before as f32
+    } else {
+        0.0
+    }
+}
+
 fn body_pixels(r: &Renderer, is_torso: &dyn Fn(u8) -> bool) -> (usize, usize) {
     let b = r.buffers();
     let mut torso = 0usize;
@@ -239,13 +275,19 @@ fn shoulder_within(
     scene: &Scene,
     camera_from_world: &Isometry3<f32>,
     renderer: &mut Renderer,
-    eye: Vector3<f32>,
     is_torso: &dyn Fn(u8) -> bool,
     candidates: &[Vector3<f32>],
     limit: f32,
+    shadow: Option<(&KinectNoise, &Intrinsics)>,
 ) -> (Vector3<f32>, f32) {
+    let eye = camera_from_world.inverse().translation.vector;
+    let mut unlit = Vec::new();
+    let mut torso = |r: &Renderer| match shadow {
+        Some((noise, k)) => lit_torso_pixels(r, noise, k, is_torso, &mut unlit),
+        None => body_pixels(r, is_torso).0,
+    };
     scene.render(renderer, camera_from_world, false);
-    let (torso0, _) = body_pixels(renderer, is_torso);
+    let torso0 = torso(renderer);
     let normals = vertex_normals(&scene.body_vertices, &scene.body_triangles);
     let mut best = (candidates[0], f32::INFINITY);
     for &shoulder in candidates {
@@ -255,10 +297,7 @@ fn shoulder_within(
                 let arm = sweep_target(scene, &normals, shoulder, eye, u, v).reach(shoulder);
                 scene.render(renderer, camera_from_world, false);
                 renderer.draw(&crate::scene::arm_draw(&arm.mesh), camera_from_world);
-                let (torso1, _) = body_pixels(renderer, is_torso);
-                if torso0 > 0 {
-                    worst = worst.max(1.0 - torso1 as f32 / torso0 as f32);
-                }
+                worst = worst.max(hidden_share(torso0, torso(renderer)));
             }
         }
         if worst <= limit {
@@ -343,6 +382,7 @@ pub fn generate(
     let mut renderer = Renderer::new(k);
     let (arm_shoulder, sweep_occluded_planned) = match (cfg.occluder, cfg.sweep_max_occluded) {
         (true, Some(limit)) => {
+            let shadow = cfg.sweep_limit_counts_shadow.then_some((&cfg.noise, &k));
             let mut candidates = if cfg.full_occlusion {
                 episodes::shoulders_for_full_occlusion(&scene0, eye, cfg.seed, SHOULDER_CANDIDATES)
             } else {
@@ -357,8 +397,15 @@ pub fn generate(
                     &mut extra,
                 ));
             }
-            let (s, occluded) =
-                shoulder_within(&scene0, &cfw, &mut renderer, eye, &is_torso, &candidates, limit);
+            let (s, occluded) = shoulder_within(
+                &scene0,
+                &cfw,
+                &mut renderer,
+                &is_torso,
+                &candidates,
+                limit,
+                shadow,
+            );
             (s, Some(occluded))
         }
         _ if cfg.full_occlusion => (
@@ -409,6 +456,7 @@ pub fn generate(
     let mut scratch = NoiseScratch::default();
     let mut temporal = TemporalState::default();
     let mut depth = vec![0u16; k.width as usize * k.height as usize];
+    let mut unlit = Vec::new();
     let (mut occ_sum, mut occ_max) = (0.0f32, 0.0f32);
     let mut torso_out: Option<(TorsoSelection, TorsoWriter)> = None;
     let mut park: Option<ArmTarget> = None;
@@ -472,7 +520,8 @@ pub fn generate(
         scene.render(&mut renderer, &cfw, false);
         let count = |r: &Renderer| body_pixels(r, &is_torso);
         let (torso0, all0) = count(&renderer);
-        let (mut torso_occ, mut body_occ) = (0.0, 0.0);
+        let lit0 = lit_torso_pixels(&renderer, &cfg.noise, &k, &is_torso, &mut unlit);
+        let (mut torso_occ, mut body_occ, mut torso_unseen) = (0.0, 0.0, 0.0);
         let mut probe = None;
         let sweep = cfg.occluder.then(|| {
             // Sweep along the midline (v: hips 0.9 → shoulders 0.15 and back) with a slow sideways wobble.
@@ -497,16 +546,12 @@ pub fn generate(
             let arm = target.reach(arm_shoulder);
             renderer.draw(&crate::scene::arm_draw(&arm.mesh), &cfw);
             let (torso1, all1) = count(&renderer);
-            torso_occ = if torso0 > 0 {
-                1.0 - torso1 as f32 / torso0 as f32
-            } else {
-                0.0
-            };
-            body_occ = if all0 > 0 {
-                1.0 - all1 as f32 / all0 as f32
-            } else {
-                0.0
-            };
+            torso_occ = hidden_share(torso0, torso1);
+            body_occ = hidden_share(all0, all1);
+            torso_unseen = hidden_share(
+                lit0,
+                lit_torso_pixels(&renderer, &cfg.noise, &k, &is_torso, &mut unlit),
+            );
             probe = Some(arm.world_from_probe);
             scene.arm = Some(arm);
         }
@@ -552,6 +597,7 @@ pub fn generate(
             world_from_probe: probe.map(|p| matrix_rows(&p)),
             torso_occluded_fraction: torso_occ,
             body_occluded_fraction: body_occ,
+            torso_unseen_fraction: Some(torso_unseen),
             breathing_mm: cfg.breathing_amplitude_m * breath * 1000.0,
             arm_blend,
             probe_truth,
@@ -652,26 +698,31 @@ mod tests {
         // Near the camera's line of sight (the full-occlusion park's shoulder) and the usual one beside the bed.
         let near = episodes::shoulder_for_full_occlusion(&scene, eye, 3).expect("a park shoulder");
         let usual = crate::dataset::sample_shoulder(&scene, scene.torso_centre()[0], &mut rng);
-        let mut hides = |c: &[Vector3<f32>], limit| {
-            shoulder_within(&scene, &cfw, &mut renderer, eye, &is_torso, c, limit)
-        };
-        let (_, w_near) = hides(&[near], 1.0);
-        let (_, w_usual) = hides(&[usual], 1.0);
-        let ((hi, w_hi), (lo, w_lo)) = if w_near > w_usual {
-            ((near, w_near), (usual, w_usual))
-        } else {
-            ((usual, w_usual), (near, w_near))
-        };
-        assert!(
-            w_hi > w_lo + 0.02 && w_lo > 0.0,
-            "the two shoulders hide {w_hi} and {w_lo}"
-        );
-        // The first candidate that holds the limit wins, even after one that does not.
-        let limit = 0.5 * (w_hi + w_lo);
-        assert_eq!(hides(&[hi, lo], limit), (lo, w_lo));
-        assert_eq!(hides(&[lo, hi], 1.0), (lo, w_lo));
-        // None holds: the one that hides least.
-        assert_eq!(hides(&[hi, lo], 0.5 * w_lo), (lo, w_lo));
+        let noise = KinectNoise::default();
+        // What the arm covers, then what the sensor loses (its projector shadow counted): the same choice rule.
+        for shadow in [None, Some((&noise, &Intrinsics::KINECT_V1))] {
+            let mut hides = |c: &[Vector3<f32>], limit| {
+                shoulder_within(&scene, &cfw, &mut renderer, &is_torso, c, limit, shadow)
+            };
+            let (_, w_near) = hides(&[near], 1.0);
+            let (_, w_usual) = hides(&[usual], 1.0);
+            let ((hi, w_hi), (lo, w_lo)) = if w_near > w_usual {
+                ((near, w_near), (usual, w_usual))
+            } else {
+                ((usual, w_usual), (near, w_near))
+            };
+            assert!(
+                w_hi > w_lo + 0.02 && w_lo > 0.0,
+                "the two shoulders hide {w_hi} and {w_lo} (shadow counted: {})",
+                shadow.is_some()
+            );
+            // The first candidate that holds the limit wins, even after one that does not.
+            let limit = 0.5 * (w_hi + w_lo);
+            assert_eq!(hides(&[hi, lo], limit), (lo, w_lo));
+            assert_eq!(hides(&[lo, hi], 1.0), (lo, w_lo));
+            // None holds: the one that hides least.
+            assert_eq!(hides(&[hi, lo], 0.5 * w_lo), (lo, w_lo));
+        }
     }
 
     #[test]
@@ -695,6 +746,11 @@ mod tests {
             .collect();
         assert_eq!(lines.len(), 6);
         assert!(lines.iter().all(|l| l.camera_from_probe.is_some()));
+        // Every frame says what share of the torso the sensor loses to the arm, and the sweeping arm hides some.
+        assert!(lines.iter().all(|l| {
+            l.torso_unseen_fraction
+                .is_some_and(|u| (0.0..=1.0).contains(&u) && u > 0.0)
+        }));
         assert_eq!(lines[1].time_us, 33_333);
         let mut reader = supine_drivers::oni::OniReader::open(dir.join("sequence.oni")).unwrap();
         let mut frames = 0;
