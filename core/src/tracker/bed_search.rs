@@ -133,11 +133,12 @@ pub fn along_the_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::planes::VolumeOfInterest;
 
-    fn bed() -> BedScene {
+    /// A flat bed 1.5 m below a camera looking straight down.
+    pub(crate) fn bed() -> BedScene {
         // Camera 1.5 m above the mattress looking down; bed frame x = camera x, y = -camera y, z = -camera z.
         let bed_from_camera = Isometry3::from_parts(
             Translation3::new(0.0, 0.0, 1.5),

@@ -552,18 +552,26 @@ fn quat_q14(q: &UnitQuaternion) -> UnitQuatQ14 {
 /// Most frames whose bed estimates the init phase can vote on ([`TrackerConfig::bed_frames`]).
 pub const MAX_BED_FRAMES: usize = 8;
 
-/// Highest hip centre above the mattress a lying patient has, metres (the pelvis is 10-20 cm thick).
+/// Highest hip centre above the mattress a lying patient has, metres (the pelvis is 10-20 cm thick), for the fits
+/// that may acquire a pose: higher ones have locked onto the arm or the bed frame.
 const MAX_HIP_HEIGHT_M: f32 = 0.3;
+/// The same for a fit from the tracked pose whose residual is low enough to acquire at once
+/// (`TorsoIcpConfig::acquire_max_rms_m`), metres: the heaviest generated bodies lie with the hip centre 0.33 m up, a
+/// few centimetres more rolled onto one side. With 0.3 m the tracker refused a heavy patient's right fits (70001-70200's
+/// s70037: hip centre 0.325 m up, RMS 3 mm, lost three times). For every fit it let a re-acquisition take a pose
+/// 0.22 m off (s70139), for every tracked one a wrong first lock rise and stay (validation s29019 under seed 2, RMS
+/// 8.5-11.4 mm). Measured in `docs/tracking.md`, twenty-sixth round.
+const TRACKED_MAX_HIP_HEIGHT_M: f32 = 0.4;
 /// Least cosine between the chest's outward axis and the mattress normal (lying, rolled or on a raised head
 /// section up to about 60°).
 const MIN_CHEST_UP_COS: f32 = 0.5;
 
 /// Whether a torso pose is one of a patient lying on the bed.
-fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
+fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene, max_hip_m: f32) -> bool {
     let hip = Point3::from(camera_from_torso.translation.vector);
     let h = bed.mattress.signed_distance(&hip);
     let chest = camera_from_torso.rotation * Vector3::z();
-    (-0.05..=MAX_HIP_HEIGHT_M).contains(&h)
+    (-0.05..=max_hip_m).contains(&h)
         && chest.dot(&bed.mattress.normal()) >= MIN_CHEST_UP_COS
         && bed_search::along_the_bed(camera_from_torso, bed)
         && bed_search::near_the_hinge(camera_from_torso, bed)
@@ -1414,7 +1422,12 @@ impl<'m, 's> Tracker<'m, 's> {
                     watch,
                 );
                 let mut q = fit.quality(&icp_cfg, min_support, prior_pose.is_none());
-                let on_bed = lies_on_bed(&pose, &t.bed);
+                let max_hip = if from_prior(i) && fit.association.rms_m() <= icp_cfg.acquire_max_rms_m {
+                    TRACKED_MAX_HIP_HEIGHT_M
+                } else {
+                    MAX_HIP_HEIGHT_M
+                };
+                let on_bed = lies_on_bed(&pose, &t.bed, max_hip);
                 if q == FitQuality::Good && !on_bed {
                     // A fit that floats above the bed or stands on edge has locked onto the arm or the bed frame.
                     q = FitQuality::Failed;
@@ -1619,7 +1632,7 @@ impl<'m, 's> Tracker<'m, 's> {
                 clock,
                 watch,
             );
-            if lies_on_bed(&pose, &t.bed)
+            if lies_on_bed(&pose, &t.bed, MAX_HIP_HEIGHT_M)
                 && fit.outsupports(&cfg, own, prior, &pose)
                 && found.is_none_or(|(_, b)| fit.support() > b.support())
             {
@@ -1722,7 +1735,8 @@ impl<'m, 's> Tracker<'m, 's> {
     ) -> Option<(Isometry3, f32)> {
         let (pose, fit) = self.fit_model(frame, start, cfg, params, budget, min_iterations, clock, watch);
         let pairs = cfg.model_points(fit.association.pairs);
-        (pairs >= cfg.min_pairs as usize && lies_on_bed(&pose, bed)).then(|| (pose, fit.support()))
+        (pairs >= cfg.min_pairs as usize && lies_on_bed(&pose, bed, MAX_HIP_HEIGHT_M))
+            .then(|| (pose, fit.support()))
     }
 
     /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once
@@ -1809,6 +1823,42 @@ impl<'m, 's> Tracker<'m, 's> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_tracked_hip_may_lie_higher_above_the_mattress_than_an_acquired_one() {
+        use crate::geometry::Translation3;
+        let bed = bed_search::tests::bed();
+        // Lying on the back, the chest toward the camera, the hip centre `h` above the mattress 1.5 m away.
+        let at = |h: f32, roll: f32| {
+            Isometry3::from_parts(
+                Translation3::new(0.0, 0.0, 1.5 - h),
+                UnitQuaternion::from_axis_angle(&Vector3::x_axis(), core::f32::consts::PI)
+                    * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), roll),
+            )
+        };
+        for (h, acquired, tracked) in [
+            (0.15, true, true),
+            (0.29, true, true),
+            (0.33, false, true),
+            (0.39, false, true),
+            (0.42, false, false),
+            (-0.08, false, false),
+        ] {
+            assert_eq!(
+                lies_on_bed(&at(h, 0.0), &bed, MAX_HIP_HEIGHT_M),
+                acquired,
+                "{h} m"
+            );
+            assert_eq!(
+                lies_on_bed(&at(h, 0.0), &bed, TRACKED_MAX_HIP_HEIGHT_M),
+                tracked,
+                "{h} m"
+            );
+        }
+        // Rolled 30° it lies; on its side it does not, however low.
+        assert!(lies_on_bed(&at(0.2, 0.5), &bed, MAX_HIP_HEIGHT_M));
+        assert!(!lies_on_bed(&at(0.2, 1.3), &bed, TRACKED_MAX_HIP_HEIGHT_M));
+    }
 
     #[test]
     fn only_later_lock_refit_rounds_wait_for_the_tracker_to_settle() {
