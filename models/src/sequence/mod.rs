@@ -209,7 +209,6 @@ pub struct SequenceSummary {
 /// Candidate shoulders tried per source when the sweep's occlusion is limited.
 const SHOULDER_CANDIDATES: usize = 12;
 
-/// Torso and whole-body pixels in the renderer's last image.
 /// Torso pixels of the render the projector lights (what the sensor can return depth for); `unlit` is scratch.
 fn lit_torso_pixels(
     r: &Renderer,
@@ -237,6 +236,7 @@ fn hidden_share(before: usize, after: usize) -> f32 {
     }
 }
 
+/// Torso and whole-body pixels in the renderer's last image.
 fn body_pixels(r: &Renderer, is_torso: &dyn Fn(u8) -> bool) -> (usize, usize) {
     let b = r.buffers();
     let mut torso = 0usize;
