@@ -270,7 +270,8 @@ impl TorsoFit {
             && self.quality(cfg, cfg.clear_view_min_support, false) == FitQuality::Good
     }
 
-    /// Whether a fit made without a pose is good enough to be taken at once (no confirmation).
+    /// Whether a fit's residual is low enough to take it at once: a fit made without a pose needs no confirmation,
+    /// and one from the tracked pose may lie a heavy patient's hip higher.
     pub fn sure(&self, cfg: &TorsoIcpConfig) -> bool {
         self.association.rms_m() <= cfg.acquire_max_rms_m
     }

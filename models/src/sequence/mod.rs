@@ -520,7 +520,6 @@ pub fn generate(
         scene.render(&mut renderer, &cfw, false);
         let count = |r: &Renderer| body_pixels(r, &is_torso);
         let (torso0, all0) = count(&renderer);
-        let lit0 = lit_torso_pixels(&renderer, &cfg.noise, &k, &is_torso, &mut unlit);
         let (mut torso_occ, mut body_occ, mut torso_unseen) = (0.0, 0.0, 0.0);
         let mut probe = None;
         let sweep = cfg.occluder.then(|| {
@@ -543,6 +542,8 @@ pub fn generate(
             }
         };
         if let Some(target) = target {
+            // What the projector lights before the arm is drawn (frames without the arm need neither count).
+            let lit0 = lit_torso_pixels(&renderer, &cfg.noise, &k, &is_torso, &mut unlit);
             let arm = target.reach(arm_shoulder);
             renderer.draw(&crate::scene::arm_draw(&arm.mesh), &cfw);
             let (torso1, all1) = count(&renderer);
