@@ -419,18 +419,76 @@ impl<'a> BodyModelView<'a> {
     /// ignored).
     #[inline]
     pub fn shape_row(&self, row: usize, s: &[f32]) -> [f32; 3] {
-        let k = self.counts.components;
-        let n = s.len().min(k);
-        let mut p = self.mean_row(row);
-        for (c, pc) in p.iter_mut().enumerate() {
-            let base = (3 * row + c) * k;
-            let mut acc = 0.0f32;
-            for (j, sj) in s.iter().enumerate().take(n) {
-                acc += self.basis.at(base + j) as f32 * self.scale.at(j) * sj;
-            }
-            *pc += acc;
+        let mut scale = [0.0f32; SHAPE_COMPONENTS];
+        let n = self.scales(s, &mut scale);
+        self.shape_row_scaled(row, &s[..n], &scale[..n])
+    }
+
+    /// The dequantisation scales of the first `min(s.len(), K)` components into `out`; returns that count.
+    #[inline]
+    fn scales(&self, s: &[f32], out: &mut [f32; SHAPE_COMPONENTS]) -> usize {
+        let n = s.len().min(self.counts.components);
+        for (j, o) in out.iter_mut().enumerate().take(n) {
+            *o = self.scale.at(j);
         }
-        p
+        n
+    }
+
+    /// [`Self::shape_row`] with the components' scales read once (`s` and `scale` of equal length, at most K): the
+    /// same products in the same order, so the same bits; the row's basis is read as one slice, without a bounds
+    /// check per element.
+    #[inline(always)]
+    fn shape_row_scaled(&self, row: usize, s: &[f32], scale: &[f32]) -> [f32; 3] {
+        self.shape_rows_scaled([row], s, scale)[0]
+    }
+
+    /// [`Self::shape_row_scaled`] for `R` rows at once. Each coordinate's sum is a chain of dependent adds; the
+    /// `3 R` chains of the rows run side by side, which is where the shaping loops spent their time (each chain's
+    /// order, and so its bits, is unchanged).
+    #[inline(always)]
+    fn shape_rows_scaled<const R: usize>(&self, rows: [usize; R], s: &[f32], scale: &[f32]) -> [[f32; 3]; R] {
+        let k = self.counts.components;
+        let n = s.len().min(scale.len());
+        let bytes = self.basis.as_bytes();
+        let basis = rows.map(|row| {
+            [0, 1, 2].map(|c| {
+                let base = 2 * (3 * row + c) * k;
+                &bytes[base..base + 2 * n]
+            })
+        });
+        let mut acc = [[0.0f32; 3]; R];
+        for (j, (sc, sj)) in scale.iter().zip(s).enumerate() {
+            for (a, b) in acc.iter_mut().zip(&basis) {
+                for (ac, bc) in a.iter_mut().zip(b) {
+                    *ac += i16::from_le_bytes([bc[2 * j], bc[2 * j + 1]]) as f32 * sc * sj;
+                }
+            }
+        }
+        let mut out = rows.map(|row| self.mean_row(row));
+        for (p, a) in out.iter_mut().zip(&acc) {
+            for (pc, ac) in p.iter_mut().zip(a) {
+                *pc += ac;
+            }
+        }
+        out
+    }
+
+    /// Every row of `rows` shaped for `s` into `out` (same length), four rows at a time.
+    fn shape_rows_into(&self, mut rows: impl Iterator<Item = usize>, s: &[f32], out: &mut [[f32; 3]]) {
+        let mut scale = [0.0f32; SHAPE_COMPONENTS];
+        let n = self.scales(s, &mut scale);
+        let (s, scale) = (&s[..n], &scale[..n]);
+        let mut chunks = out.chunks_exact_mut(4);
+        for o in &mut chunks {
+            let (Some(a), Some(b), Some(c), Some(d)) = (rows.next(), rows.next(), rows.next(), rows.next())
+            else {
+                return;
+            };
+            o.copy_from_slice(&self.shape_rows_scaled([a, b, c, d], s, scale));
+        }
+        for (o, row) in chunks.into_remainder().iter_mut().zip(rows) {
+            *o = self.shape_row_scaled(row, s, scale);
+        }
     }
 
     /// Skin vertex `v` for coefficients `s`.
@@ -441,13 +499,16 @@ impl<'a> BodyModelView<'a> {
     /// The K basis vectors of row `row` (`out[k]` = dequantised `V` rows for component k); returns how many were
     /// written (`min(out.len(), K)`). This is the Jacobian of the row's position w.r.t. `s`, as Eq. 7 needs.
     pub fn row_basis(&self, row: usize, out: &mut [[f32; 3]]) -> usize {
-        let n = out.len().min(self.counts.components);
-        for (k, o) in out.iter_mut().enumerate().take(n) {
-            *o = [
-                self.basis(row, 0, k),
-                self.basis(row, 1, k),
-                self.basis(row, 2, k),
-            ];
+        let k = self.counts.components;
+        let n = out.len().min(k);
+        let bytes = self.basis.as_bytes();
+        let base = 2 * 3 * row * k;
+        // The row's three coordinates, each K components long: one slice each, no bounds check per element.
+        let [x, y, z] = [0, 1, 2].map(|c| &bytes[base + 2 * c * k..base + 2 * (c * k + n)]);
+        for (q, o) in out.iter_mut().enumerate().take(n) {
+            let sc = self.scale.at(q);
+            let at = |b: &[u8]| i16::from_le_bytes([b[2 * q], b[2 * q + 1]]) as f32 * sc;
+            *o = [at(x), at(y), at(z)];
         }
         n
     }
@@ -460,9 +521,7 @@ impl<'a> BodyModelView<'a> {
                 found: out.len(),
             });
         }
-        for (o, v) in out.iter_mut().zip(self.subset.iter()) {
-            *o = self.shape_row(v as usize, s);
-        }
+        self.shape_rows_into(self.subset.iter().map(usize::from), s, out);
         Ok(())
     }
 
@@ -474,9 +533,7 @@ impl<'a> BodyModelView<'a> {
                 found: out.len(),
             });
         }
-        for (v, o) in out.iter_mut().enumerate() {
-            *o = self.shape_row(v, s);
-        }
+        self.shape_rows_into(0..self.counts.vertices, s, out);
         Ok(())
     }
 
@@ -644,6 +701,58 @@ mod tests {
         assert_eq!(v.skin_influence(1, 0).0, 0);
         assert!((v.skin_influence(1, 0).1 - 0.5).abs() < 1e-4);
         assert_eq!(v.sigma(1), fixture::SIGMA[1]);
+    }
+
+    #[test]
+    fn the_shaping_loops_give_the_bits_of_the_element_formula() {
+        // shape_row, the subset and row_basis read each row as a slice with the scales read once: the same
+        // products, summed in the same order, as M + sum_j basis(row, c, j) s_j (the fits' answers rest on it).
+        let (buf, n) = tiny();
+        let v = BodyModelView::parse(&buf[..n]).unwrap();
+        let c = v.counts();
+        let bits = |p: [f32; 3]| p.map(f32::to_bits);
+        for s in [&[0.7f32, -1.3][..], &[0.7], &[0.7, -1.3, 5.0], &[]] {
+            for row in 0..c.rows() {
+                let mut want = v.mean_row(row);
+                for (axis, w) in want.iter_mut().enumerate() {
+                    let mut acc = 0.0f32;
+                    for (j, sj) in s.iter().enumerate().take(c.components) {
+                        acc += v.basis(row, axis, j) * sj;
+                    }
+                    *w += acc;
+                }
+                assert_eq!(
+                    bits(v.shape_row(row, s)),
+                    bits(want),
+                    "row {row}, {} coefficients",
+                    s.len()
+                );
+            }
+            let mut subset = [[0.0; 3]; 3];
+            v.shape_torso_subset(s, &mut subset).unwrap();
+            for (i, &vtx) in fixture::SUBSET.iter().enumerate() {
+                assert_eq!(bits(subset[i]), bits(v.shape_row(vtx as usize, s)));
+            }
+            // Four vertices: the four-row path (the subset's three take the one-row path).
+            let mut all = [[0.0; 3]; 4];
+            v.shape_vertices(s, &mut all).unwrap();
+            for (vtx, p) in all.iter().enumerate() {
+                assert_eq!(bits(*p), bits(v.shape_row(vtx, s)));
+            }
+        }
+        let mut basis = [[f32::NAN; 3]; COMPONENTS + 1];
+        for row in 0..c.rows() {
+            assert_eq!(v.row_basis(row, &mut basis), COMPONENTS);
+            for (k, b) in basis.iter().take(COMPONENTS).enumerate() {
+                assert_eq!(
+                    bits(*b),
+                    bits([0, 1, 2].map(|axis| v.basis(row, axis, k))),
+                    "row {row}"
+                );
+            }
+            assert!(basis[COMPONENTS][0].is_nan(), "past K nothing is written");
+            assert_eq!(v.row_basis(row, &mut basis[..1]), 1);
+        }
     }
 
     #[test]

@@ -337,10 +337,12 @@ pub fn fit_shape_with(
                 for (q, jq) in j.iter_mut().enumerate() {
                     *jq = n.dot(&Vector3::from(basis[q])) * body.sigma(q) / u;
                 }
+                // Whole rows, though the solve reads only the lower triangle: its sums are the same products in
+                // the same order (the same bits), and a fixed-length row vectorises where the triangle did not.
                 for x in 0..SHAPE_COMPONENTS {
                     b[x] += j[x] * r;
-                    for y in 0..=x {
-                        a[x][y] += j[x] * j[y];
+                    for (ay, jy) in a[x].iter_mut().zip(&j) {
+                        *ay += j[x] * jy;
                     }
                 }
             },
