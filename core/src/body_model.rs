@@ -473,21 +473,18 @@ impl<'a> BodyModelView<'a> {
         out
     }
 
-    /// Every row of `rows` shaped for `s` into `out` (same length), four rows at a time.
-    fn shape_rows_into(&self, mut rows: impl Iterator<Item = usize>, s: &[f32], out: &mut [[f32; 3]]) {
+    /// `out[i]` = row `row(i)` shaped for `s`, four rows at a time.
+    fn shape_rows_into(&self, row: impl Fn(usize) -> usize, s: &[f32], out: &mut [[f32; 3]]) {
         let mut scale = [0.0f32; SHAPE_COMPONENTS];
         let n = self.scales(s, &mut scale);
         let (s, scale) = (&s[..n], &scale[..n]);
+        let done = out.len() - out.len() % 4;
         let mut chunks = out.chunks_exact_mut(4);
-        for o in &mut chunks {
-            let (Some(a), Some(b), Some(c), Some(d)) = (rows.next(), rows.next(), rows.next(), rows.next())
-            else {
-                return;
-            };
-            o.copy_from_slice(&self.shape_rows_scaled([a, b, c, d], s, scale));
+        for (c, o) in (&mut chunks).enumerate() {
+            o.copy_from_slice(&self.shape_rows_scaled([0, 1, 2, 3].map(|d| row(4 * c + d)), s, scale));
         }
-        for (o, row) in chunks.into_remainder().iter_mut().zip(rows) {
-            *o = self.shape_row_scaled(row, s, scale);
+        for (i, o) in chunks.into_remainder().iter_mut().enumerate() {
+            *o = self.shape_row_scaled(row(done + i), s, scale);
         }
     }
 
@@ -521,7 +518,7 @@ impl<'a> BodyModelView<'a> {
                 found: out.len(),
             });
         }
-        self.shape_rows_into(self.subset.iter().map(usize::from), s, out);
+        self.shape_rows_into(|i| usize::from(self.subset.at(i)), s, out);
         Ok(())
     }
 
@@ -533,7 +530,7 @@ impl<'a> BodyModelView<'a> {
                 found: out.len(),
             });
         }
-        self.shape_rows_into(0..self.counts.vertices, s, out);
+        self.shape_rows_into(|v| v, s, out);
         Ok(())
     }
 

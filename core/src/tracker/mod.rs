@@ -555,10 +555,10 @@ pub const MAX_BED_FRAMES: usize = 8;
 /// Highest hip centre above the mattress a lying patient has, metres (the pelvis is 10-20 cm thick), for the fits
 /// that may acquire a pose: higher ones have locked onto the arm or the bed frame.
 const MAX_HIP_HEIGHT_M: f32 = 0.3;
-/// The same for a fit from the tracked pose whose residual is low enough to acquire at once
-/// (`TorsoFit::sure`), metres: the heaviest generated bodies lie with the hip centre 0.33 m up, a
-/// few centimetres more rolled onto one side. With 0.3 m the tracker refused a heavy patient's right fits (70001-70200's
-/// s70037: hip centre 0.325 m up, RMS 3 mm, lost three times). For every fit it let a re-acquisition take a pose
+/// The same for a fit from the tracked pose whose residual is low enough to acquire at once (`TorsoFit::sure`),
+/// metres: the heaviest generated bodies lie with the hip centre 0.33 m up, a few centimetres more rolled onto one
+/// side. With 0.3 m the tracker refused a heavy patient's right fits (70001-70200's s70037: hip centre 0.325 m up,
+/// RMS 3 mm, lost three times). For every fit it let a re-acquisition take a pose
 /// 0.22 m off (s70139), for every tracked one a wrong first lock rise and stay (validation s29019 under seed 2, RMS
 /// 8.5-11.4 mm). Measured in `docs/tracking.md`, twenty-sixth round.
 const TRACKED_MAX_HIP_HEIGHT_M: f32 = 0.4;

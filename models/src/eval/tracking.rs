@@ -607,18 +607,13 @@ pub fn run_variant(
         }
         Value::Object(m)
     };
-    let recovery = full
-        .as_ref()
-        .and_then(|f| f.episodes().full_occlusion.as_ref().map(|o| o.end))
-        .map(|end| recovery_frames(end, &scores));
+    let occlusion = full.as_ref().and_then(|f| f.episodes().full_occlusion.as_ref());
+    let recovery = occlusion.map(|o| recovery_frames(o.end, &scores));
     let motion = full
         .as_ref()
         .and_then(|f| f.episodes().motion.as_ref())
         .map(|m| motion_score(m, &scores));
-    let sweep_unseen = sweep_unseen_max(
-        &scores,
-        full.as_ref().and_then(|f| f.episodes().full_occlusion.as_ref()),
-    );
+    let sweep_unseen = sweep_unseen_max(&scores, occlusion);
     let c = tracker.counters();
     let summary = json!({
         "frames": scores.len(),
