@@ -71,6 +71,22 @@ impl MemoStamp {
             step_px,
         }
     }
+
+    /// The memo of the frame [`MemoStamp::next`] last handed out (`None` before the first), to read that frame's
+    /// normals again while no newer frame has been stamped.
+    pub fn current<'m>(
+        &self,
+        cells: &'m [Cell<MemoCell>],
+        width: u16,
+        step_px: u16,
+    ) -> Option<NormalMemo<'m>> {
+        (self.0 > 0).then_some(NormalMemo {
+            cells,
+            width,
+            stamp: self.0,
+            step_px,
+        })
+    }
 }
 
 impl NormalMemo<'_> {
@@ -152,6 +168,25 @@ mod tests {
             assert_eq!(m.get_or(u, v, || count(None)), None);
         }
         assert_eq!(calls.get(), 7);
+    }
+
+    #[test]
+    fn the_current_memo_reads_the_last_frames_normals_until_the_next_frame() {
+        let mut buf = [MemoCell::EMPTY; 4];
+        let cells = Cell::from_mut(&mut buf[..]).as_slice_of_cells();
+        let mut stamps = MemoStamp::default();
+        assert!(stamps.current(cells, 2, 2).is_none());
+        let m = stamps.next(cells, 2, 2);
+        assert_eq!(m.get_or(1, 0, || Some([0.0, 1.0, 0.0])), Some([0.0, 1.0, 0.0]));
+        let again = stamps.current(cells, 2, 2).unwrap();
+        assert_eq!(again.get_or(1, 0, || None), Some([0.0, 1.0, 0.0]));
+        let _ = stamps.next(cells, 2, 2);
+        let stale = stamps.current(cells, 2, 2).unwrap();
+        assert_eq!(
+            stale.get_or(1, 0, || None),
+            None,
+            "the next frame's memo does not read it"
+        );
     }
 
     #[test]

@@ -99,6 +99,7 @@ pub struct TrackerScratch {
     torso_regions: Vec<BodyRegion>,
     forest: Box<Workspace>,
     normal_memo: Vec<MemoCell>,
+    refit_depth: Vec<u16>,
 }
 
 impl TrackerScratch {
@@ -116,6 +117,7 @@ impl TrackerScratch {
             torso_regions: vec![BodyRegion::OffBody; sizes.torso],
             forest: Box::new(Workspace::new()),
             normal_memo: vec![MemoCell::EMPTY; sizes.pixels],
+            refit_depth: vec![0; sizes.pixels],
         }
     }
 
@@ -133,6 +135,7 @@ impl TrackerScratch {
             torso_regions: &mut self.torso_regions,
             forest: &mut self.forest,
             normal_memo: &mut self.normal_memo,
+            refit_depth: &mut self.refit_depth,
         }
     }
 }

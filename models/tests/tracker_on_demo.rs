@@ -1,7 +1,8 @@
 //! The real-time tracker (`supine_core::tracker`) on the committed demo recording with the committed default
 //! models: it initialises and tracks, allocates nothing per frame, replays bit-identically, ICP converges back from
-//! a known perturbation, the shape refit on lock (in rounds) moves the shape toward the truth, and bad frames
-//! (empty, wrong size, no patient) lead to defined states.
+//! a known perturbation, the shape refit on lock (in rounds) moves the shape toward the truth and fits the frame it
+//! was chosen on though the next frame runs it, and bad frames (empty, wrong size, no patient) lead to defined
+//! states.
 
 use std::path::Path;
 use supine_core::camera::Intrinsics;
@@ -352,6 +353,58 @@ fn shape_refit_on_lock_moves_the_shape_toward_the_truth() {
     assert_eq!(revisions.len(), 1 + rounds as usize);
     assert!(later <= 1.05 * refit, "{rounds} rounds {later} vs one {refit}");
     assert!(later < 0.9 * init, "{rounds} rounds {later} vs init {init}");
+}
+
+/// The body-shape packets (frame, revision, coefficients) of the demo's first `n` frames with the default
+/// tracker, frame `blank` (if any) replaced by one without depth.
+fn shape_packets(
+    models: &Models<'_>,
+    seq: &SequenceData,
+    n: usize,
+    blank: Option<usize>,
+) -> Vec<(usize, u8, [i16; 20])> {
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let cfg = config(seq);
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let empty = vec![0u16; 640 * 480];
+    let mut out = Vec::new();
+    for (i, (d, t)) in frames.iter().enumerate().take(n) {
+        clock.set(*t);
+        let d = if blank == Some(i) { &empty } else { d };
+        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
+        for p in r.packets.iter() {
+            if let Body::BodyShape(b) = p.body {
+                out.push((i, b.revision, b.coefficients_milli));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn a_lock_refit_chosen_on_a_frame_fits_that_frames_pixels_on_the_next_frame() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let all = shape_packets(&models, &seq, 60, None);
+    // Revision 1 is the init phase's shape; 2 the first round of lock refits, adopted when the frame after the
+    // round's last refit was chosen arrives (the refit runs first), and announced by that frame.
+    let &(adopted, revision, shape) = all
+        .iter()
+        .find(|p| p.1 == 2)
+        .expect("the lock refits adopted a shape");
+    // That frame's own pixels do not enter the refit: without depth it announces the same shape.
+    let blanked = shape_packets(&models, &seq, adopted + 1, Some(adopted));
+    assert_eq!(blanked.last(), Some(&(adopted, revision, shape)));
+    // The frame the refit was chosen on does: without depth it chooses none, and the next frame adopts nothing.
+    let unchosen = shape_packets(&models, &seq, adopted + 1, Some(adopted - 1));
+    assert!(
+        unchosen.iter().all(|p| p.1 < 2),
+        "the refit ran without its frame: {unchosen:?}"
+    );
 }
 
 #[test]

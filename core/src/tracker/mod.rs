@@ -31,7 +31,8 @@
 //! The torso model is revised on the first tracked frames: lock refits of the shape (Eq. 7 from the tracked pose,
 //! [`TrackerConfig::lock_refits`], in [`TrackerConfig::refit_rounds`]), then the [`surface`] adaptation, which moves
 //! the model's front along its normals onto what a few well-seen frames show of this patient
-//! ([`TrackerConfig::surface`]).
+//! ([`TrackerConfig::surface`]). A lock refit chosen on a frame runs when the next frame arrives, on a copy of the
+//! chosen frame's depth ([`Scratch::refit_depth`]): the frame that locks has paid for the acquisition's fits.
 //!
 //! Three variants share the loop, for the evaluation of the paper's claim: [`Variant::Forest`] (the forest's points
 //! alone give the pose), [`Variant::ForestIcp`] (ICP from the forest each frame, no prior), and
@@ -335,7 +336,7 @@ pub struct ScratchSizes {
     pub canonical: usize,
     /// `fit_points`, `fit_normals`, `surface_sums` and the three torso buffers (the body model's torso subset).
     pub torso: usize,
-    /// `normal_memo` (the frame's pixels).
+    /// `normal_memo` and `refit_depth` (the frame's pixels).
     pub pixels: usize,
 }
 
@@ -379,6 +380,8 @@ pub struct Scratch<'s> {
     pub forest: &'s mut Workspace,
     /// The memo of each frame's observed normals, one cell per pixel ([`crate::normal_memo`]).
     pub normal_memo: &'s mut [MemoCell],
+    /// The depth of the frame a lock refit was chosen on, kept for the next frame, which runs that refit.
+    pub refit_depth: &'s mut [u16],
 }
 
 /// Why a tracker could not be built.
@@ -492,6 +495,16 @@ impl Init {
     }
 }
 
+/// A lock refit chosen on a frame and run at the start of the next ([`TrackerConfig::lock_refits`]): the torso
+/// model and pose it starts from, and the frame's stamp; its depth waits in [`Scratch::refit_depth`].
+#[derive(Debug, Clone, Copy)]
+struct PendingRefit {
+    torso: TorsoModel,
+    camera_from_torso: Isometry3,
+    capture: Timestamp,
+    index: u32,
+}
+
 #[derive(Debug, Clone, Copy)]
 struct TorsoModel {
     bed: BedScene,
@@ -519,6 +532,8 @@ pub struct Tracker<'m, 's> {
     switch_candidate: Option<Isometry3>,
     /// The support of a right fit of this patient with this shape: set at acquisition, followed while tracking.
     support_ref: Option<f32>,
+    /// The lock refit the last frame chose, run when the next frame arrives.
+    pending_refit: Option<PendingRefit>,
     frames: u32,
     seq: u16,
     shape_revision: u8,
@@ -662,6 +677,7 @@ impl<'m, 's> Tracker<'m, 's> {
         check("torso_normals", sizes.torso, scratch.torso_normals.len())?;
         check("torso_regions", sizes.torso, scratch.torso_regions.len())?;
         check("normal_memo", sizes.pixels, scratch.normal_memo.len())?;
+        check("refit_depth", sizes.pixels, scratch.refit_depth.len())?;
         let memo_cells = Cell::from_mut(core::mem::take(&mut scratch.normal_memo)).as_slice_of_cells();
         // The init phase's shape regression, chosen once (`TrackerConfig::shape_point_features`).
         let models = Models {
@@ -686,6 +702,7 @@ impl<'m, 's> Tracker<'m, 's> {
             candidate: None,
             switch_candidate: None,
             support_ref: None,
+            pending_refit: None,
             frames: 0,
             seq: 0,
             shape_revision: 0,
@@ -754,12 +771,15 @@ impl<'m, 's> Tracker<'m, 's> {
         self.candidate = None;
         self.switch_candidate = None;
         self.support_ref = None;
+        self.pending_refit = None;
     }
 
     /// The source reported a fault; the next usable frame re-acquires.
     pub fn sensor_fault(&mut self) {
         self.machine.sensor_fault();
         self.pose = None;
+        // Its adoption would restore a pose the fault dropped; a later tracked frame refits instead.
+        self.pending_refit = None;
     }
 
     /// The caller dropped `n` frames unprocessed (it only ever hands over the newest).
@@ -894,6 +914,11 @@ impl<'m, 's> Tracker<'m, 's> {
             }
         }
         self.last_capture = Some(frame.capture);
+        // The last frame's lock refit, before this frame's stamp retires that frame's normals.
+        if let Some(pending) = self.pending_refit.take() {
+            self.run_pending_refit(pending, clock, &watch);
+            watch.lap(clock, Stage::Init);
+        }
         // Every ICP fit of this frame reads its normals through one memo (the results are the same bits).
         let memo = self
             .memo_stamp
@@ -1074,6 +1099,35 @@ impl<'m, 's> Tracker<'m, 's> {
             0
         };
         self.machine.init_done();
+    }
+
+    /// Keep `frame` for a lock refit from `camera_from_torso` with the torso model `t`, run when the next frame
+    /// arrives ([`Tracker::run_pending_refit`]): the frame that locks pays for the acquisition's fits, and a refit
+    /// beside them took it past 4 ms; the next frame pays for the refit beside a tracking frame's work. The same
+    /// refit on the same pixels either way. Cost: a copy of the frame (0.6 MB at 640x480).
+    fn defer_refit(&mut self, frame: &DepthFrame<'_>, t: TorsoModel, camera_from_torso: Isometry3) {
+        // `process` checked the frame's size against the intrinsics, so the lengths agree.
+        self.scratch.refit_depth.copy_from_slice(frame.depth_mm());
+        self.pending_refit = Some(PendingRefit {
+            torso: t,
+            camera_from_torso,
+            capture: frame.capture,
+            index: frame.index,
+        });
+    }
+
+    /// The lock refit the last frame chose, on that frame's kept depth and normals (its memo stays valid until this
+    /// frame is stamped).
+    fn run_pending_refit(&mut self, p: PendingRefit, clock: &(impl Clock + ?Sized), watch: &Stopwatch) {
+        let depth = core::mem::take(&mut self.scratch.refit_depth);
+        if let Ok(kept) = DepthFrame::new(depth, self.k.width, self.k.height, p.capture, p.index) {
+            let memo = self
+                .memo_stamp
+                .current(self.memo_cells, self.k.width, icp::NORMAL_STEP_PX);
+            let kept = memo.map_or(kept, |m| kept.with_normal_memo(m));
+            self.refit_on_lock(&kept, &p.torso, p.camera_from_torso, clock, watch);
+        }
+        self.scratch.refit_depth = depth;
     }
 
     /// One lock refit: Eq. 7 (with the bed contact, when configured) from the tracked pose `camera_from_torso` and
@@ -1561,10 +1615,14 @@ impl<'m, 's> Tracker<'m, 's> {
             && report.fit.visible >= refit_gate(&self.cfg, self.init.waited)
             && let Some(pose) = self.pose
         {
-            self.refit_on_lock(frame, &t, pose, clock, watch);
+            self.defer_refit(frame, t, pose);
             watch.lap(clock, Stage::Init);
         }
+        // A round's last refit adopts its shape when it runs, and the surface waits for the tracker to settle with
+        // that shape, as it would had the refit run in this frame.
+        let adopting = self.pending_refit.is_some() && self.init.refits_left == 1;
         if variant != Variant::Forest
+            && !adopting
             && self.cfg.surface.frames > 0
             && self.init.surface_rounds < self.cfg.surface.rounds
             && self.init.settled > self.cfg.surface.settle_frames
