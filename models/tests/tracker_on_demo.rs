@@ -12,7 +12,7 @@ use supine_core::geometry::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use supine_core::time::{Timestamp, VirtualClock};
 use supine_core::tracker::budget::Stopwatch;
 use supine_core::tracker::torso_icp::{self, TorsoIcpConfig};
-use supine_core::tracker::{Models, ScratchSizes, Tracker, TrackerConfig};
+use supine_core::tracker::{FrameReport, Models, ScratchSizes, Tracker, TrackerConfig};
 use supine_core::wire::{Body, Message, TrackerState};
 use supine_drivers::SourceErrorKind;
 use supine_drivers::oni::OniReader;
@@ -284,17 +284,12 @@ fn shape_after(
     bed: Option<BedContact>,
     n: usize,
 ) -> (f32, f32, Vec<u8>) {
-    let frames = frames();
-    let k = Intrinsics::KINECT_V1;
     let cfg = TrackerConfig {
         lock_refits,
         refit_rounds: rounds.saturating_sub(1),
         refit_bed_contact: bed,
         ..config(seq)
     };
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let dist = |z: &[f32; 20]| {
         z.iter()
             .zip(&seq.meta.shape)
@@ -303,13 +298,13 @@ fn shape_after(
             .sqrt()
     };
     let mut init = None;
+    let mut last = None;
     let mut revisions = Vec::new();
-    for (i, (d, t)) in frames.iter().enumerate().take(n) {
-        clock.set(*t);
-        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
+    track_demo(models, cfg, n, None, |_, tracker, r| {
         if init.is_none() {
             init = tracker.shape().map(dist);
         }
+        last = tracker.shape().map(dist);
         for p in r.packets.iter() {
             if let Body::BodyShape(b) = p.body
                 && revisions.last() != Some(&b.revision)
@@ -317,12 +312,35 @@ fn shape_after(
                 revisions.push(b.revision);
             }
         }
-    }
+    });
     (
         init.expect("init finished"),
-        dist(tracker.shape().unwrap()),
+        last.expect("init finished"),
         revisions,
     )
+}
+
+/// The demo's first `n` frames, in order, through a tracker with `cfg`, frame `blank` (if any) replaced by one
+/// without depth; `each(frame index, tracker, report)` after every frame.
+fn track_demo(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    n: usize,
+    blank: Option<usize>,
+    mut each: impl FnMut(usize, &Tracker<'_, '_>, &FrameReport),
+) {
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let empty = vec![0u16; 640 * 480];
+    for (i, (d, t)) in frames.iter().enumerate().take(n) {
+        clock.set(*t);
+        let d = if blank == Some(i) { &empty } else { d };
+        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
+        each(i, &tracker, &r);
+    }
 }
 
 #[test]
@@ -363,24 +381,14 @@ fn shape_packets(
     n: usize,
     blank: Option<usize>,
 ) -> Vec<(usize, u8, [i16; 20])> {
-    let frames = frames();
-    let k = Intrinsics::KINECT_V1;
-    let cfg = config(seq);
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let empty = vec![0u16; 640 * 480];
     let mut out = Vec::new();
-    for (i, (d, t)) in frames.iter().enumerate().take(n) {
-        clock.set(*t);
-        let d = if blank == Some(i) { &empty } else { d };
-        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
+    track_demo(models, config(seq), n, blank, |i, _, r| {
         for p in r.packets.iter() {
             if let Body::BodyShape(b) = p.body {
                 out.push((i, b.revision, b.coefficients_milli));
             }
         }
-    }
+    });
     out
 }
 

@@ -48,7 +48,7 @@ use supine_drivers::tracker_host::{ModelFiles, OwnedTorso, TrackerScratch};
 
 use super::tracking_truth::TrackingTruth;
 use crate::sequence::episodes::{FullOcclusion, Motion, MotionKind};
-use crate::sequence::{FrameTruth, SequenceMeta};
+use crate::sequence::{FrameTruth, SWEEP_MAX_OCCLUDED, SequenceMeta};
 
 /// Arguments of `supine-models eval tracking`.
 #[derive(Debug, clap::Args)]
@@ -668,7 +668,7 @@ fn sweep_unseen_max(scores: &[FrameScore], occlusion: Option<&FullOcclusion>) ->
         .try_fold(0.0f32, |m, s| s.unseen.map(|u| m.max(u)))
 }
 
-/// [`combine`] over the sequences whose sweep stayed within [`SWEEP_LIMIT`] (`within`) or went beyond it, by their
+/// [`combine`] over the sequences whose sweep stayed within [`SWEEP_MAX_OCCLUDED`] (`within`) or went beyond it, by their
 /// `torso_unseen_max_sweep` (sequences without it in neither), with their count as `sequences`; `None` when there
 /// are none. `frame_ms` holds each sequence's frame times, in `summaries`' order.
 fn sweep_split(summaries: &[Value], frame_ms: &[Vec<f32>], within: bool) -> Option<Value> {
@@ -678,7 +678,7 @@ fn sweep_split(summaries: &[Value], frame_ms: &[Vec<f32>], within: bool) -> Opti
         .filter(|(s, _)| {
             s["torso_unseen_max_sweep"]
                 .as_f64()
-                .is_some_and(|u| (u <= SWEEP_LIMIT) == within)
+                .is_some_and(|u| (u <= f64::from(SWEEP_MAX_OCCLUDED)) == within)
         })
         .map(|(s, m)| (s.clone(), m.clone()))
         .unzip();
@@ -840,10 +840,6 @@ fn motions_followed(summaries: &[Value]) -> Value {
 
 /// The recovery target: tracked again within this many frames after the full occlusion.
 const RECOVERY_TARGET_FRAMES: u32 = 5;
-
-/// The condition on the arm's sweep: it hides up to half the torso (`sequence --sweep-max-occluded`'s
-/// default).
-const SWEEP_LIMIT: f64 = 0.5;
 
 /// Average the per-sequence summaries of one variant (frame-weighted for rates, mean for errors); `frame_ms` holds
 /// the processing time of every frame after the init phase of all its sequences, for the pooled percentiles.

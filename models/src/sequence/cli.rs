@@ -1,7 +1,7 @@
 //! `supine-models sequence`: argument parsing, progress bar and JSON summary around [`super::generate`].
 
 use super::episodes::MotionKind;
-use super::{SequenceConfig, generate};
+use super::{SWEEP_MAX_OCCLUDED, SequenceConfig, generate};
 use crate::scene::model_body::{BodyKind, open_source};
 use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 use std::path::PathBuf;
@@ -23,7 +23,7 @@ pub struct SequenceArgs {
     /// With --occluder: the sweep hides at most this share of the torso (the robot's shoulder is placed so, checked
     /// on the first frame). Seeds whose first shoulder already holds it give the sequence of earlier versions byte
     /// for byte; 1 reproduces earlier versions for every seed.
-    #[arg(long, default_value_t = 0.5, value_parser = share)]
+    #[arg(long, default_value_t = SWEEP_MAX_OCCLUDED, value_parser = share)]
     pub sweep_max_occluded: f32,
     /// Whether --sweep-max-occluded counts the torso the arm's projector shadow hides beside what the arm covers
     /// (what the sensor loses; `false`: only what it covers, as versions before 2026-12-06 did).

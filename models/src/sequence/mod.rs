@@ -44,6 +44,10 @@ use supine_core::geometry::Plane;
 use supine_drivers::oni::{Codec, OniWriter};
 use torso_truth::{ProbeTruth, SurfaceQuery, TorsoSelection, TorsoWriter};
 
+/// The condition on the arm's sweep: it hides at most half the torso (`sequence --sweep-max-occluded`'s
+/// default; `eval tracking` splits its figures by it).
+pub const SWEEP_MAX_OCCLUDED: f32 = 0.5;
+
 /// Parameters of a sequence.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SequenceConfig {
