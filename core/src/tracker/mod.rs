@@ -239,15 +239,22 @@ pub struct TrackerConfig {
     /// 0.3 mm of the lowest). Held while tracking too: 12.2 / 11.3 mm at 0.1 / 0.3, probe 11.6 / 10.0 mm. Holding the
     /// translation too was worse (0.3: 12.1 mm): the patient shifts under the arm.
     pub occluded_hold_rotation: f32,
-    /// The surface adaptation ([`surface`]; `frames` 0: off): once the torso model has been tracked for
-    /// `settle_frames` good frames, `frames` frames that see at least half the torso are averaged per vertex and the
-    /// model's front moves onto them (one round of 15 frames, within 3 cm, observations within 6 mm SD). A torso
-    /// model adopted later (a lock refit round) keeps the displacement found. On the 46 validation sequences it
-    /// moved the torso error 10.28 / 6.40 -> 10.09 / 6.21 mm (mean / median) and the probe error 9.04 -> 8.87 mm;
-    /// these sequences reach it only after 106-147 of their 150 frames (the full occlusion comes first), and on the
-    /// frames after it the torso error fell 5.77 / 4.00 -> 4.70 / 3.11 mm and the probe error 5.93 -> 5.25 mm. Three
-    /// rounds of 5 frames scored within 0.1 mm of one round on validation but let a slid pose drift further on a
-    /// held-out roll (s25001); docs/tracking.md, "The surface adaptation".
+    /// The surface adaptation ([`surface`]; `frames` 0: off): once the torso model has been tracked for `settle_frames`
+    /// good frames, `frames` frames that see at least half the torso are averaged per vertex and the model's front
+    /// moves onto them (within 3 cm, observations within 6 mm SD); each of `rounds` rounds adds to the displacement so
+    /// far. A torso model adopted later (a lock refit round) keeps the displacement found. Two rounds of 8 frames after
+    /// 3 settling frames since 2026-12-06: one round of 15 frames after 10 was reached only after the full occlusion
+    /// (frames 108-148 of 150 on 34001-34100, in 57 of the 100 sequences), so most frames were tracked without it; the
+    /// shorter rounds finish between the lock refit rounds (the first from frame 23 on, in 80 of the 100, 66 of them
+    /// before the full occlusion). On the choice sets 34001-34100 / 70001-70200 the torso error went 12.31 / 12.27 ->
+    /// 11.81 / 11.98 mm and the probe error 11.27 / 12.42 -> 11.18 / 12.21 mm; over the sequences within 20 mm the
+    /// torso error fell 0.57 / 0.57 mm on average (39 / 70 sequences gaining more than 0.5 mm, 2 / 6 losing), the
+    /// tracked share within 0.1 % and the recoveries within one sequence. One round of 8 frames gave 11.98 / 12.02 mm,
+    /// of 5 frames 11.91 / 12.01 mm, three rounds of 8 11.74 / 11.88 mm (more losers on 70001-70200; docs/tracking.md,
+    /// twenty-ninth round); adapting only after the last refit round gave 12.10 mm on 34001-34100. When introduced
+    /// (2026-12-04, one round of 15 after 10) it moved the 46 validation sequences 10.28 / 6.40 -> 10.09 / 6.21 mm
+    /// (mean / median), and three rounds of 5 frames let a slid pose drift further on a held-out roll (s25001; "The
+    /// surface adaptation").
     pub surface: SurfaceConfig,
     /// Bed-plane search.
     pub planes: PlaneConfig,

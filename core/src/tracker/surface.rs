@@ -45,9 +45,9 @@ pub struct SurfaceConfig {
 impl Default for SurfaceConfig {
     fn default() -> Self {
         SurfaceConfig {
-            frames: 15,
-            rounds: 1,
-            settle_frames: 10,
+            frames: 8,
+            rounds: 2,
+            settle_frames: 3,
             min_visible: 0.5,
             max_m: 0.03,
             min_share: 0.3,

@@ -137,12 +137,16 @@ pub struct TrackingEvalArgs {
     /// the tracker's, 10).
     #[arg(long)]
     pub refit_settle_frames: Option<u16>,
-    /// The tracker's surface adaptation: tracked frames averaged per round (default: the tracker's, 15; 0: off).
+    /// The tracker's surface adaptation: tracked frames averaged per round (default: the tracker's, 8; 0: off).
     #[arg(long)]
     pub surface_frames: Option<u16>,
-    /// The tracker's surface adaptation rounds (default: the tracker's, 1).
+    /// The tracker's surface adaptation rounds (default: the tracker's, 2).
     #[arg(long)]
     pub surface_rounds: Option<u8>,
+    /// The tracker's surface adaptation: good tracked frames with the current torso model before a frame counts
+    /// (default: the tracker's, 3).
+    #[arg(long)]
+    pub surface_settle_frames: Option<u16>,
     /// The tracker's `refit_min_visible`: a lock refit waits for a fit that sees this share of the torso.
     #[arg(long, value_parser = parse_visible_share)]
     pub refit_min_visible: Option<f32>,
@@ -459,6 +463,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.surface_rounds {
         cfg.surface.rounds = n;
+    }
+    if let Some(n) = args.surface_settle_frames {
+        cfg.surface.settle_frames = n;
     }
     if args.true_shape {
         let mut z = [0.0; SHAPE_COMPONENTS];
