@@ -675,9 +675,9 @@ fn sweep_unseen_max(scores: &[FrameScore], occlusion: Option<&FullOcclusion>) ->
         .try_fold(0.0f32, |m, s| s.unseen.map(|u| m.max(u)))
 }
 
-/// [`combine`] over the sequences whose sweep stayed within [`SWEEP_MAX_OCCLUDED`] (`within`) or went beyond it, by their
-/// `torso_unseen_max_sweep` (sequences without it in neither), with their count as `sequences`; `None` when there
-/// are none. `frame_ms` holds each sequence's frame times, in `summaries`' order.
+/// [`combine`] over the sequences whose sweep stayed within [`SWEEP_MAX_OCCLUDED`] (`within`) or went beyond it, by
+/// their `torso_unseen_max_sweep` (sequences without it in neither), with their count as `sequences`; `None` when
+/// there are none. `frame_ms` holds each sequence's frame times, in `summaries`' order.
 fn sweep_split(summaries: &[Value], frame_ms: &[Vec<f32>], within: bool) -> Option<Value> {
     let (picked, ms): (Vec<Value>, Vec<Vec<f32>>) = summaries
         .iter()
