@@ -95,6 +95,10 @@ pub struct EvalShapeArgs {
     /// Joint forest for `--points forest` [default: models/artifacts/joints.jfor].
     #[arg(long)]
     pub joint_forest: Option<PathBuf>,
+    /// `--points forest` reads each frame as the tracker does (and as `train joints` and `eval joints` do), through
+    /// the height ceiling over the bed planes, metres (0: as rendered, as every figure before 2026-12-06's round 9).
+    #[arg(long, default_value_t = supine_core::tracker::FOREST_CEILING_M)]
+    pub ceiling_m: f32,
     /// Weight of the bed-contact residual of the `combined_bed` method.
     #[arg(long, default_value_t = 1.0)]
     pub bed_weight: f32,
@@ -154,6 +158,7 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         a.split == "test" || a.split == "validation",
         "--split must be test or validation"
     );
+    crate::forest::data::check_ceiling(a.ceiling_m)?;
     let ds = Dataset::open(&a.data).with_context(|| format!("opening dataset {}", a.data.display()))?;
     let model = match &a.body_model {
         Some(p) => BodyModel::load(p)?,
@@ -179,6 +184,7 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         split: a.split.clone(),
         points: a.points.clone(),
         joint_forest: a.joint_forest.clone(),
+        forest_ceiling_m: a.ceiling_m,
         bed_weight: a.bed_weight,
         free_coeffs: a.free_coeffs.clone(),
         free_weight: a.free_weight.unwrap_or(supine_core::fit::FREE_PRIOR_WEIGHT),

@@ -16,6 +16,7 @@ use supine_core::depth::DepthFrame;
 use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
 use supine_core::forest::model::ForestView;
+use supine_core::forest::sample::Ceiling;
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
 use supine_core::time::Timestamp;
@@ -240,6 +241,8 @@ pub struct EvalConfig {
     pub points: String,
     /// Joint forest file for `points = forest` (default: the committed one).
     pub joint_forest: Option<std::path::PathBuf>,
+    /// The tracker's height ceiling the forest reads frames through, metres (0: as rendered).
+    pub forest_ceiling_m: f32,
     /// Weight of the bed-contact residual of `combined_bed` (see `supine_core::fit::BedContact`).
     pub bed_weight: f32,
     /// Coefficients the combined fits leave nearly free (small Λ); `None` = `torso_coeffs`, as the paper did.
@@ -356,7 +359,12 @@ pub fn evaluate(
                         seed: image_seed(cfg.seed, b, f.view),
                         method: Method::Refined,
                     };
-                    let est = estimate(jf, &frame, &k, &clip, &ic, &[None; 6], &mut joint_ws);
+                    let est = if cfg.forest_ceiling_m > 0.0 {
+                        let ceiling = Ceiling::new(&frame, &k, &f.clip_planes, cfg.forest_ceiling_m);
+                        estimate(jf, &ceiling, &k, &clip, &ic, &[None; 6], &mut joint_ws)
+                    } else {
+                        estimate(jf, &frame, &k, &clip, &ic, &[None; 6], &mut joint_ws)
+                    };
                     if est.iter().any(Option::is_none) {
                         failures += 1;
                         continue;

@@ -488,6 +488,7 @@ mod tests {
             split: "test".into(),
             points: "noisy".into(),
             joint_forest: None,
+            forest_ceiling_m: 0.0,
             bed_weight: 1.0,
             free_coeffs: None,
             free_weight: supine_core::fit::FREE_PRIOR_WEIGHT,
