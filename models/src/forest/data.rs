@@ -11,7 +11,10 @@ use crate::render::noise::Rect;
 use crate::render::{Label, NO_PART};
 use supine_core::body_model::BodyPart;
 use supine_core::camera::Intrinsics;
+use supine_core::depth::DepthFrame;
 use supine_core::forest::feature::DepthImage;
+use supine_core::forest::infer::{InferConfig, PointEstimate, Workspace, estimate};
+use supine_core::forest::model::ForestModel;
 use supine_core::forest::sample::{Ceiling, Clip, PixelRect, SamplePixel, sample_pixels};
 use supine_core::geometry::Plane;
 use supine_core::salient::SalientPoint;
@@ -34,6 +37,34 @@ pub fn check_ceiling(ceiling_m: f32) -> anyhow::Result<()> {
         "--ceiling-m must be in [0, 10] m"
     );
     Ok(())
+}
+
+/// The forest's six points on `frame` as the tracker reads it: clipped above `planes` ([`clip_for`]) and, when
+/// `ceiling_m` > 0, through the height ceiling over them; no prior. The evaluations' one way to run the forest.
+pub fn estimate_as_tracked<M: ForestModel + ?Sized>(
+    model: &M,
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    planes: &[Plane; 2],
+    ceiling_m: f32,
+    cfg: &InferConfig,
+    ws: &mut Workspace,
+) -> [Option<PointEstimate>; SalientPoint::COUNT] {
+    let clip = clip_for(planes, k);
+    let none = [None; SalientPoint::COUNT];
+    if ceiling_m > 0.0 {
+        estimate(
+            model,
+            &Ceiling::new(frame, k, planes, ceiling_m),
+            k,
+            &clip,
+            cfg,
+            &none,
+            ws,
+        )
+    } else {
+        estimate(model, frame, k, &clip, cfg, &none, ws)
+    }
 }
 
 /// The clip of a view: above the mattress and head-section planes (camera frame), anywhere in the image.

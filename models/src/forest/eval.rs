@@ -6,7 +6,7 @@
 //! cost in views that change, which a few gross-error flips hide in an RMSE. Cost: one inference per view and
 //! method.
 
-use super::data::{clip_for, view_planes};
+use super::data::{estimate_as_tracked, view_planes};
 use super::train::image_seed;
 use crate::dataset::Dataset;
 use anyhow::{Result, ensure};
@@ -15,9 +15,8 @@ use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::infer::{InferConfig, Method, Workspace};
 use supine_core::forest::model::ForestModel;
-use supine_core::forest::sample::Ceiling;
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 
@@ -179,20 +178,14 @@ pub fn evaluate(
                         };
                         let mut answers = vec![[None; P]; cands.len()];
                         let planes = view_planes(&v.truth);
-                        let clip = clip_for(&planes, &k);
                         let sub = if v.truth.probe.is_some() { 1 } else { 2 };
-                        let ceiling = Ceiling::new(&frame, &k, &planes, ceiling_m);
                         for (ci, c) in cands.iter().enumerate() {
                             let cfg = InferConfig {
                                 samples,
                                 seed: image_seed(seed, body, v.truth.view),
                                 method: c.method,
                             };
-                            let est = if ceiling_m > 0.0 {
-                                estimate(c.model, &ceiling, &k, &clip, &cfg, &[None; P], ws)
-                            } else {
-                                estimate(c.model, &frame, &k, &clip, &cfg, &[None; P], ws)
-                            };
+                            let est = estimate_as_tracked(c.model, &frame, &k, &planes, ceiling_m, &cfg, ws);
                             for p in 0..P {
                                 answers[ci][p] = est[p].map(|x| x.position);
                                 let e = est[p].map(|x| {

@@ -14,9 +14,8 @@ use std::time::Instant;
 use supine_core::body_model::BodyModelView;
 use supine_core::depth::DepthFrame;
 use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
-use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
+use supine_core::forest::infer::{InferConfig, Method, Workspace};
 use supine_core::forest::model::ForestView;
-use supine_core::forest::sample::Ceiling;
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
 use supine_core::time::Timestamp;
@@ -24,7 +23,7 @@ use supine_core::time::Timestamp;
 use super::data::{ShapeFrame, body_pose, frames_of, intrinsics};
 use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
 use crate::dataset::Dataset;
-use crate::forest::data::clip_for;
+use crate::forest::data::estimate_as_tracked;
 use crate::forest::train::image_seed;
 use crate::pose::Pose;
 
@@ -353,18 +352,20 @@ pub fn evaluate(
             let pts: [Point3<f32>; 6] = match &joints {
                 None => f.noisy_points,
                 Some(jf) => {
-                    let clip = clip_for(&f.clip_planes, &k);
                     let ic = InferConfig {
                         samples: jf.samples_per_frame(),
                         seed: image_seed(cfg.seed, b, f.view),
                         method: Method::Refined,
                     };
-                    let est = if cfg.forest_ceiling_m > 0.0 {
-                        let ceiling = Ceiling::new(&frame, &k, &f.clip_planes, cfg.forest_ceiling_m);
-                        estimate(jf, &ceiling, &k, &clip, &ic, &[None; 6], &mut joint_ws)
-                    } else {
-                        estimate(jf, &frame, &k, &clip, &ic, &[None; 6], &mut joint_ws)
-                    };
+                    let est = estimate_as_tracked(
+                        jf,
+                        &frame,
+                        &k,
+                        &f.clip_planes,
+                        cfg.forest_ceiling_m,
+                        &ic,
+                        &mut joint_ws,
+                    );
                     if est.iter().any(Option::is_none) {
                         failures += 1;
                         continue;
