@@ -14,11 +14,12 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
 use supine_core::forest::model::ForestView;
+use supine_core::forest::sample::Clip;
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 use supine_models::dataset::{Dataset, DatasetConfig, generate};
 use supine_models::forest::cli::default_path;
-use supine_models::forest::data::{clip_for, view_planes};
+use supine_models::forest::data::view_planes;
 use supine_models::scene::model_body::{BodyKind, open_source};
 
 /// This thread's CPU time so far, if the kernel tells it (the yield makes the scheduler bring it up to date).
@@ -61,7 +62,7 @@ fn bench(c: &mut Criterion) {
     let mut one = |method: Method| {
         let (depth, planes) = &frames[(frame_i % frames.len() as u64) as usize];
         let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
-        let clip = clip_for(planes, &k);
+        let clip = Clip::over_image(planes, &k);
         let cfg = InferConfig {
             samples: view.samples_per_frame(),
             seed: frame_i,

@@ -14,7 +14,7 @@ use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estimate, estimate_from_leaves};
 use supine_core::forest::model::{ForestModel, ForestView};
-use supine_core::forest::sample::{SamplePixel, sample_pixels};
+use supine_core::forest::sample::{Clip, SamplePixel, sample_pixels};
 use supine_core::forest::{MAX_SAMPLES, MAX_TREES, meanshift::Vote};
 use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, isometry_from_rows};
 use supine_core::icp::{IcpParams, point_to_plane_step};
@@ -29,7 +29,7 @@ use supine_core::wire::BodyRegion;
 use supine_core::wire::message::Message;
 use supine_core::wire::sample::MESSAGES;
 use supine_models::body::BodyModel;
-use supine_models::forest::data::clip_for;
+
 use supine_models::sequence::{FrameTruth, SequenceMeta};
 use supine_tests::fixtures::{demo_dir, demo_frames};
 
@@ -76,7 +76,7 @@ fn bench(c: &mut Criterion) {
         std::fs::read(supine_models::forest::cli::default_path()).expect("models/artifacts/joints.jfor");
     let forest = ForestView::parse(&fbytes).expect("valid default forest");
     let planes = [mattress, meta.planes_camera[2]];
-    let clip = clip_for(&planes, &k);
+    let clip = Clip::over_image(&planes, &k);
     let samples = forest.samples_per_frame().min(MAX_SAMPLES);
     let mut px = vec![SamplePixel::default(); samples];
     let mut leaves = vec![[0u32; MAX_TREES]; samples];

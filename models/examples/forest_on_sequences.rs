@@ -15,7 +15,9 @@ use supine_core::depth::DepthFrame;
 use supine_core::forest::feature::DepthImage;
 use supine_core::forest::infer::{self, InferConfig, Method, Workspace};
 use supine_core::forest::model::ForestView;
-use supine_core::forest::sample::{Ceiling, Clip, PixelRect, SamplePixel, sample_pixels};
+use supine_core::forest::sample::{
+    CLIP_MARGIN_M, CLIP_MAX_DEPTH_MM, Ceiling, Clip, PixelRect, SamplePixel, sample_pixels,
+};
 use supine_core::geometry::Plane;
 use supine_core::planes::{self, BedScene, PlaneConfig};
 use supine_drivers::SourceErrorKind;
@@ -173,9 +175,9 @@ fn main() -> Result<()> {
                         4 => voi,
                         _ => &planes,
                     },
-                    margin_m: 0.02,
+                    margin_m: CLIP_MARGIN_M,
                     region: if i == 1 || i == 2 { rect } else { full_rect },
-                    max_depth_mm: 4000,
+                    max_depth_mm: CLIP_MAX_DEPTH_MM,
                 };
                 let cfg = InferConfig {
                     samples: forest.samples_per_frame(),

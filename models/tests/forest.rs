@@ -10,13 +10,13 @@ use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estimate, estimate_from_leaves};
 use supine_core::forest::meanshift::Vote;
 use supine_core::forest::model::{ForestModel, ForestView};
-use supine_core::forest::sample::sample_pixels;
+use supine_core::forest::sample::{Clip, sample_pixels};
 use supine_core::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES};
 
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 use supine_models::dataset::{Dataset, DatasetConfig, generate};
-use supine_models::forest::data::{CLASS_ARM, TrainImage, clip_for, view_planes};
+use supine_models::forest::data::{CLASS_ARM, TrainImage, view_planes};
 use supine_models::forest::eval::{Candidate, evaluate};
 use supine_models::forest::refine::RefineParams;
 use supine_models::forest::sidecar::{self, FloatLeaves};
@@ -154,7 +154,7 @@ fn quantised_agrees_with_float_on_fixed_images() {
             let full = view.full_depth(640, 480);
             let frame = DepthFrame::new(&full, 640, 480, Timestamp::default(), 0).unwrap();
             let planes = view_planes(&view.truth);
-            let clip = clip_for(&planes, &k);
+            let clip = Clip::over_image(&planes, &k);
             let cfg = InferConfig {
                 samples: 256,
                 seed: 5,
@@ -202,7 +202,7 @@ fn the_fast_frame_path_equals_the_reference_path() {
             let full = view.full_depth(640, 480);
             let frame = DepthFrame::new(&full, 640, 480, Timestamp::default(), 0).unwrap();
             let planes = view_planes(&view.truth);
-            let clip = clip_for(&planes, &k);
+            let clip = Clip::over_image(&planes, &k);
             let mut px = vec![Default::default(); 256];
             let n = sample_pixels(&frame, &k, &clip, 9, &mut px);
             assert!(n > 0 && n <= MAX_SAMPLES);

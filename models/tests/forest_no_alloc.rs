@@ -7,10 +7,11 @@ use supine_core::depth::DepthFrame;
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate, reestimate};
 use supine_core::forest::meanshift::Prior;
 use supine_core::forest::model::ForestView;
+use supine_core::forest::sample::Clip;
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 use supine_models::dataset::{Dataset, DatasetConfig, generate};
-use supine_models::forest::data::{clip_for, view_planes};
+use supine_models::forest::data::view_planes;
 use supine_models::forest::refine::RefineParams;
 use supine_models::forest::train::{TrainConfig, train};
 use supine_models::forest::tree::TreeParams;
@@ -73,7 +74,7 @@ fn inference_allocates_nothing() {
     let ((), n) = count_allocations(|| {
         for (depth, planes) in &frames {
             let frame = DepthFrame::new(depth, 640, 480, Timestamp::default(), 0).unwrap();
-            let clip = clip_for(planes, &k);
+            let clip = Clip::over_image(planes, &k);
             for (seed, method) in [(1, Method::Refined), (2, Method::Baseline)] {
                 let cfg = InferConfig {
                     samples: 512,

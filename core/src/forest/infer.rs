@@ -8,9 +8,9 @@ use crate::camera::Intrinsics;
 use crate::forest::feature::{DepthImage, ProbeOrigin, ProbeScale};
 use crate::forest::meanshift::{Prior, Vote, VoteBuffer, mean_shift};
 use crate::forest::model::{ForestModel, Node};
-use crate::forest::sample::{Clip, SamplePixel, sample_pixels};
+use crate::forest::sample::{Ceiling, Clip, SamplePixel, sample_pixels};
 use crate::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES, MODES};
-use crate::geometry::Point3;
+use crate::geometry::{Plane, Point3};
 use crate::salient::SalientPoint;
 
 const P: usize = SalientPoint::COUNT;
@@ -353,6 +353,36 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     );
     ws.last = n;
     reestimate(model, cfg.method, priors, ws)
+}
+
+/// One frame as the tracker reads it: [`estimate`] over the whole image above the bed `planes`
+/// ([`Clip::over_image`]), through the height ceiling of `ceiling_m` over them when it is positive ([`Ceiling`]: what
+/// lies higher, the arm's links, reads as no depth).
+#[allow(clippy::too_many_arguments)] // estimate's arguments, with the planes and the ceiling instead of the clip
+pub fn estimate_above<M: ForestModel + ?Sized, D: DepthImage + ?Sized, const N: usize>(
+    model: &M,
+    img: &D,
+    k: &Intrinsics,
+    planes: &[Plane; N],
+    ceiling_m: f32,
+    cfg: &InferConfig,
+    priors: &[Option<Prior>; P],
+    ws: &mut Workspace,
+) -> [Option<PointEstimate>; P] {
+    let clip = Clip::over_image(planes, k);
+    if ceiling_m > 0.0 {
+        estimate(
+            model,
+            &Ceiling::new(img, k, planes, ceiling_m),
+            k,
+            &clip,
+            cfg,
+            priors,
+            ws,
+        )
+    } else {
+        estimate(model, img, k, &clip, cfg, priors, ws)
+    }
 }
 
 /// The six points again from the last [`estimate`]'s samples and leaves in `ws`, with `priors` (which may differ

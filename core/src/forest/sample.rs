@@ -24,6 +24,11 @@ pub struct PixelRect {
     pub v1: u16,
 }
 
+/// Margin above the bed planes the tracker's clip keeps (Kinect noise at 1.5 m is about 5 mm), metres.
+pub const CLIP_MARGIN_M: f32 = 0.02;
+/// Farthest depth the tracker's clip keeps, mm.
+pub const CLIP_MAX_DEPTH_MM: u16 = 4000;
+
 /// The clip the caller gives: pixels inside `region`, with depth in `(0, max_depth_mm]`, at least `margin_m` above
 /// every plane of `above` (camera frame, normals pointing up from the surface).
 #[derive(Clone, Copy, Debug)]
@@ -51,7 +56,22 @@ pub struct SamplePixel {
     pub p: [f32; 3],
 }
 
-impl Clip<'_> {
+impl<'a> Clip<'a> {
+    /// The tracker's clip: the whole image of `k`, above `planes` by [`CLIP_MARGIN_M`], up to [`CLIP_MAX_DEPTH_MM`].
+    pub fn over_image(planes: &'a [Plane], k: &Intrinsics) -> Self {
+        Clip {
+            above: planes,
+            margin_m: CLIP_MARGIN_M,
+            region: PixelRect {
+                u0: 0,
+                v0: 0,
+                u1: k.width,
+                v1: k.height,
+            },
+            max_depth_mm: CLIP_MAX_DEPTH_MM,
+        }
+    }
+
     /// Whether pixel (x, y) at depth `d_mm` is kept; returns its camera-frame point when it is.
     #[inline]
     pub fn keep(&self, k: &Intrinsics, x: u16, y: u16, d_mm: u16) -> Option<Point3> {

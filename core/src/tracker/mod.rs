@@ -59,11 +59,9 @@ use crate::calib::solve::{Pair, kabsch};
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
 use crate::fit::{self, FitParams};
-use crate::forest::feature::DepthImage;
 use crate::forest::infer::{self, InferConfig, Method, PointEstimate, Workspace};
 use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
-use crate::forest::sample::{Ceiling, Clip, PixelRect};
 use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
 use crate::icp;
 use crate::normal_memo::{MemoCell, MemoStamp};
@@ -835,18 +833,6 @@ impl<'m, 's> Tracker<'m, 's> {
         bed: &BedScene,
         priors: &[Option<Prior>; P],
     ) -> [Option<PointEstimate>; P] {
-        let planes = Self::clip_planes(bed);
-        let clip = Clip {
-            above: &planes,
-            margin_m: 0.02,
-            region: PixelRect {
-                u0: 0,
-                v0: 0,
-                u1: self.k.width,
-                v1: self.k.height,
-            },
-            max_depth_mm: 4000,
-        };
         let samples = match self.cfg.forest_samples {
             0 => self.models.joints.samples_per_frame(),
             n => n as usize,
@@ -856,28 +842,13 @@ impl<'m, 's> Tracker<'m, 's> {
             seed: mix_seed(self.cfg.seed, self.frames as u64),
             method: Method::Refined,
         };
-        if self.cfg.forest_ceiling_m > 0.0 {
-            let img = Ceiling::new(frame, &self.k, &planes, self.cfg.forest_ceiling_m);
-            self.estimate_on(&img, &clip, &cfg, priors)
-        } else {
-            self.estimate_on(frame, &clip, &cfg, priors)
-        }
-    }
-
-    /// The forest's six points on `img` (generic, so the per-pixel reads stay static calls).
-    fn estimate_on<D: DepthImage + ?Sized>(
-        &mut self,
-        img: &D,
-        clip: &Clip<'_>,
-        cfg: &InferConfig,
-        priors: &[Option<Prior>; P],
-    ) -> [Option<PointEstimate>; P] {
-        infer::estimate(
+        infer::estimate_above(
             &self.models.joints,
-            img,
+            frame,
             &self.k,
-            clip,
-            cfg,
+            &Self::clip_planes(bed),
+            self.cfg.forest_ceiling_m,
+            &cfg,
             priors,
             self.scratch.forest,
         )

@@ -8,7 +8,7 @@
 
 use super::npy;
 use crate::dataset::{Dataset, DatasetConfig, generate};
-use crate::forest::data::{TrainImage, clip_for, view_planes};
+use crate::forest::data::{TrainImage, view_planes};
 use crate::forest::refine::RefineParams;
 use crate::forest::train::{TrainConfig, image_seed, split_validation, train};
 use crate::forest::tree::TreeParams;
@@ -25,7 +25,7 @@ use supine_core::depth::DepthFrame;
 use supine_core::forest::feature::{DepthImage, ProbeScale, probe};
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate};
 use supine_core::forest::model::ForestView;
-use supine_core::forest::sample::{SamplePixel, sample_pixels};
+use supine_core::forest::sample::{Clip, SamplePixel, sample_pixels};
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
 
@@ -171,7 +171,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
         for v in &rec.views {
             let img = TrainImage::from_view(v, &k, tcfg.ceiling_m);
             let planes = view_planes(&v.truth);
-            let clip = clip_for(&planes, &k);
+            let clip = Clip::over_image(&planes, &k);
             let mut px = vec![SamplePixel::default(); cfg.samples];
             let n = sample_pixels(&img, &k, &clip, image_seed(tcfg.seed, b, v.truth.view), &mut px);
             for s in &px[..n] {
@@ -223,7 +223,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
     for (i, (d, pl)) in depths.iter().zip(&planes_all).enumerate() {
         let frame = DepthFrame::new(d, k.width, k.height, Timestamp::default(), 0)
             .map_err(|e| anyhow::anyhow!("frame: {e}"))?;
-        let clip = clip_for(pl, &k);
+        let clip = Clip::over_image(pl, &k);
         let mut px = vec![SamplePixel::default(); cfg.samples];
         let n = sample_pixels(&frame, &k, &clip, seed_of(i), &mut px);
         counts.push(n);
@@ -258,7 +258,7 @@ pub fn run(cfg: &ForestBenchConfig, out: &Path, progress: bool) -> Result<serde_
             let frame = DepthFrame::new(d, k.width, k.height, Timestamp::default(), 0)
                 .map_err(|e| anyhow::anyhow!("frame: {e}"))?;
             let t0 = Instant::now();
-            let clip = clip_for(pl, &k);
+            let clip = Clip::over_image(pl, &k);
             let icfg = InferConfig {
                 samples: cfg.samples,
                 seed: seed_of(i),

@@ -11,11 +11,8 @@ use crate::render::noise::Rect;
 use crate::render::{Label, NO_PART};
 use supine_core::body_model::BodyPart;
 use supine_core::camera::Intrinsics;
-use supine_core::depth::DepthFrame;
 use supine_core::forest::feature::DepthImage;
-use supine_core::forest::infer::{InferConfig, PointEstimate, Workspace, estimate};
-use supine_core::forest::model::ForestModel;
-use supine_core::forest::sample::{Ceiling, Clip, PixelRect, SamplePixel, sample_pixels};
+use supine_core::forest::sample::{Ceiling, Clip, SamplePixel, sample_pixels};
 use supine_core::geometry::Plane;
 use supine_core::salient::SalientPoint;
 
@@ -25,10 +22,6 @@ pub const CLASS_ARM: u8 = BodyPart::COUNT as u8;
 pub const CLASS_OTHER: u8 = BodyPart::COUNT as u8 + 1;
 /// Number of classes the trees are grown for (17 parts, the arm, other).
 pub const CLASSES: usize = BodyPart::COUNT + 2;
-/// Margin above the bed planes the clip keeps (Kinect noise at 1.5 m is about 5 mm), metres.
-pub const CLIP_MARGIN_M: f32 = 0.02;
-/// Farthest depth the clip keeps, mm.
-pub const CLIP_MAX_DEPTH_MM: u16 = 4000;
 
 /// Checks a height ceiling given to the trainer or the evaluation (`--ceiling-m`), metres.
 pub fn check_ceiling(ceiling_m: f32) -> anyhow::Result<()> {
@@ -39,52 +32,10 @@ pub fn check_ceiling(ceiling_m: f32) -> anyhow::Result<()> {
     Ok(())
 }
 
-/// The forest's six points on `frame` as the tracker reads it: clipped above `planes` ([`clip_for`]) and, when
-/// `ceiling_m` > 0, through the height ceiling over them; no prior. The evaluations' one way to run the forest.
-pub fn estimate_as_tracked<M: ForestModel + ?Sized>(
-    model: &M,
-    frame: &DepthFrame<'_>,
-    k: &Intrinsics,
-    planes: &[Plane; 2],
-    ceiling_m: f32,
-    cfg: &InferConfig,
-    ws: &mut Workspace,
-) -> [Option<PointEstimate>; SalientPoint::COUNT] {
-    let clip = clip_for(planes, k);
-    let none = [None; SalientPoint::COUNT];
-    if ceiling_m > 0.0 {
-        estimate(
-            model,
-            &Ceiling::new(frame, k, planes, ceiling_m),
-            k,
-            &clip,
-            cfg,
-            &none,
-            ws,
-        )
-    } else {
-        estimate(model, frame, k, &clip, cfg, &none, ws)
-    }
-}
-
-/// The clip of a view: above the mattress and head-section planes (camera frame), anywhere in the image.
+/// A view's bed planes from its truth, camera frame: the mattress and the head section (what the clip keeps points
+/// above).
 pub fn view_planes(truth: &ViewTruth) -> [Plane; 2] {
     [truth.planes_camera[1], truth.planes_camera[2]]
-}
-
-/// The clip over the whole image above `planes`.
-pub fn clip_for<'a>(planes: &'a [Plane], k: &Intrinsics) -> Clip<'a> {
-    Clip {
-        above: planes,
-        margin_m: CLIP_MARGIN_M,
-        region: PixelRect {
-            u0: 0,
-            v0: 0,
-            u1: k.width,
-            v1: k.height,
-        },
-        max_depth_mm: CLIP_MAX_DEPTH_MM,
-    }
 }
 
 /// One view's crop: depth (mm) and class per pixel; reads outside the crop give 0 (no depth), as in the full frame.
@@ -187,7 +138,7 @@ pub fn sample_image(
     out: &mut Vec<TrainSample>,
 ) {
     let planes = view_planes(truth);
-    let clip = clip_for(&planes, k);
+    let clip = Clip::over_image(&planes, k);
     let mut buf = vec![SamplePixel::default(); n];
     let got = sample_pixels(img, k, &clip, seed, &mut buf);
     out.extend(buf[..got].iter().map(|px| TrainSample {

@@ -6,7 +6,7 @@
 //! cost in views that change, which a few gross-error flips hide in an RMSE. Cost: one inference per view and
 //! method.
 
-use super::data::{estimate_as_tracked, view_planes};
+use super::data::view_planes;
 use super::train::image_seed;
 use crate::dataset::Dataset;
 use anyhow::{Result, ensure};
@@ -15,7 +15,7 @@ use rayon::prelude::*;
 use serde_json::{Map, Value, json};
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::forest::infer::{InferConfig, Method, Workspace};
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate_above};
 use supine_core::forest::model::ForestModel;
 use supine_core::salient::SalientPoint;
 use supine_core::time::Timestamp;
@@ -185,7 +185,8 @@ pub fn evaluate(
                                 seed: image_seed(seed, body, v.truth.view),
                                 method: c.method,
                             };
-                            let est = estimate_as_tracked(c.model, &frame, &k, &planes, ceiling_m, &cfg, ws);
+                            let est =
+                                estimate_above(c.model, &frame, &k, &planes, ceiling_m, &cfg, &[None; P], ws);
                             for p in 0..P {
                                 answers[ci][p] = est[p].map(|x| x.position);
                                 let e = est[p].map(|x| {

@@ -14,7 +14,7 @@ use std::time::Instant;
 use supine_core::body_model::BodyModelView;
 use supine_core::depth::DepthFrame;
 use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
-use supine_core::forest::infer::{InferConfig, Method, Workspace};
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate_above};
 use supine_core::forest::model::ForestView;
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
@@ -23,7 +23,6 @@ use supine_core::time::Timestamp;
 use super::data::{ShapeFrame, body_pose, frames_of, intrinsics};
 use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
 use crate::dataset::Dataset;
-use crate::forest::data::estimate_as_tracked;
 use crate::forest::train::image_seed;
 use crate::pose::Pose;
 
@@ -357,13 +356,14 @@ pub fn evaluate(
                         seed: image_seed(cfg.seed, b, f.view),
                         method: Method::Refined,
                     };
-                    let est = estimate_as_tracked(
+                    let est = estimate_above(
                         jf,
                         &frame,
                         &k,
                         &f.clip_planes,
                         cfg.forest_ceiling_m,
                         &ic,
+                        &[None; 6],
                         &mut joint_ws,
                     );
                     if est.iter().any(Option::is_none) {
