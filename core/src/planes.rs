@@ -137,6 +137,14 @@ pub struct BedScene {
     pub patient_points: u32,
 }
 
+impl BedScene {
+    /// The planes the tracker's clip keeps points above (camera frame): the mattress and the raised head section, or
+    /// the mattress twice on a flat bed.
+    pub fn clip_planes(&self) -> [Plane; 2] {
+        [self.mattress, self.head_section.unwrap_or(self.mattress)]
+    }
+}
+
 /// A box in the bed frame (origin on the mattress at the centre of its visible part, x across, y along the bed,
 /// z up from the mattress): the per-frame clip.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -29,7 +29,6 @@ use supine_core::wire::BodyRegion;
 use supine_core::wire::message::Message;
 use supine_core::wire::sample::MESSAGES;
 use supine_models::body::BodyModel;
-
 use supine_models::sequence::{FrameTruth, SequenceMeta};
 use supine_tests::fixtures::{demo_dir, demo_frames};
 

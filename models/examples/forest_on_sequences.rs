@@ -71,9 +71,10 @@ fn voi_clip_planes(bed: &BedScene) -> [Plane; 7] {
             d: -n_cam.dot(&p_cam.coords),
         }
     };
+    let [mattress, head] = bed.clip_planes();
     [
-        bed.mattress,
-        bed.head_section.unwrap_or(bed.mattress),
+        mattress,
+        head,
         side(0, 1.0, v.min[0]),
         side(0, -1.0, v.max[0]),
         side(1, 1.0, v.min[1]),

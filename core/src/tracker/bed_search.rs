@@ -12,7 +12,7 @@
 //! vertex (the tracker's `screen_stride`; about 0.5-1 ms with the default model); nothing while tracking; nothing
 //! allocates.
 
-use crate::geometry::{Isometry3, Matrix3, Plane, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use crate::geometry::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use crate::planes::BedScene;
 use heapless::Vec;
 
@@ -41,32 +41,9 @@ pub fn back_depth_m(torso_vertices: &[Point3]) -> f32 {
 pub fn grid_starts(forest: &Isometry3, bed: &BedScene, back_m: f32) -> Vec<Isometry3, STARTS> {
     let camera_from_bed = bed.volume.bed_from_camera.inverse();
     let across = camera_from_bed.rotation * Vector3::x();
-    let forest_axis = forest.rotation * Vector3::y();
     let hip = Point3::from(forest.translation.vector);
-    let mut out = Vec::new();
-    let up = bed.mattress.normal();
-    let mut lie_on = |plane: &Plane, toward: Vector3, hip: Point3| {
-        let z = plane.normal();
-        let Some(x) = (across - z * across.dot(&z)).try_normalize(1e-6) else {
-            return;
-        };
-        let (x, y) = {
-            let y = z.cross(&x);
-            if y.dot(&toward) >= 0.0 { (x, y) } else { (-x, -y) }
-        };
-        let rotation = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
-            Matrix3::from_columns(&[x, y, z]),
-        ));
-        let centre = hip.coords - z * (plane.signed_distance(&hip) - back_m);
-        for along in ALONG_M {
-            for side in ACROSS_M {
-                let at = centre + y * along + x * side;
-                let _ = out.push(Isometry3::from_parts(Translation3::from(at), rotation));
-            }
-        }
-    };
-    match bed.head_section {
-        None => lie_on(&bed.mattress, forest_axis, hip),
+    let (plane, toward, hip) = match bed.head_section {
+        None => (bed.mattress, forest.rotation * Vector3::y(), hip),
         Some(head) => {
             // The head lies up the raised section: the body axis rises away from the mattress. A forest's hip
             // centre too far toward the foot end for a patient on the section (the legs taken for the torso) moves
@@ -77,7 +54,27 @@ pub fn grid_starts(forest: &Isometry3, bed: &BedScene, back_m: f32) -> Vec<Isome
                 (Some(s), Some(u)) if s < -MAX_HIPS_BELOW_HINGE_M => hip - u * s,
                 _ => hip,
             };
-            lie_on(&head, up, on_section);
+            (head, bed.mattress.normal(), on_section)
+        }
+    };
+    let mut out = Vec::new();
+    let z = plane.normal();
+    let Some(x) = (across - z * across.dot(&z)).try_normalize(1e-6) else {
+        return out;
+    };
+    let (x, y) = {
+        let y = z.cross(&x);
+        if y.dot(&toward) >= 0.0 { (x, y) } else { (-x, -y) }
+    };
+    let rotation =
+        UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[
+            x, y, z,
+        ])));
+    let centre = hip.coords - z * (plane.signed_distance(&hip) - back_m);
+    for along in ALONG_M {
+        for side in ACROSS_M {
+            let at = centre + y * along + x * side;
+            let _ = out.push(Isometry3::from_parts(Translation3::from(at), rotation));
         }
     }
     out
@@ -141,6 +138,7 @@ pub fn along_the_bed(camera_from_torso: &Isometry3, bed: &BedScene) -> bool {
 #[cfg(test)]
 pub(crate) mod tests {
     use super::*;
+    use crate::geometry::Plane;
     use crate::planes::VolumeOfInterest;
 
     /// A flat bed 1.5 m below a camera looking straight down.

@@ -62,7 +62,7 @@ use crate::fit::{self, FitParams};
 use crate::forest::infer::{self, InferConfig, Method, PointEstimate, Workspace};
 use crate::forest::meanshift::Prior;
 use crate::forest::model::ForestView;
-use crate::geometry::{Isometry3, Plane, Point3, UnitQuaternion, Vector3};
+use crate::geometry::{Isometry3, Point3, UnitQuaternion, Vector3};
 use crate::icp;
 use crate::normal_memo::{MemoCell, MemoStamp};
 use crate::planes::{self, BedScene, PlaneConfig};
@@ -823,10 +823,6 @@ impl<'m, 's> Tracker<'m, 's> {
         m
     }
 
-    fn clip_planes(bed: &BedScene) -> [Plane; 2] {
-        [bed.mattress, bed.head_section.unwrap_or(bed.mattress)]
-    }
-
     fn forest(
         &mut self,
         frame: &DepthFrame<'_>,
@@ -846,7 +842,7 @@ impl<'m, 's> Tracker<'m, 's> {
             &self.models.joints,
             frame,
             &self.k,
-            &Self::clip_planes(bed),
+            &bed.clip_planes(),
             self.cfg.forest_ceiling_m,
             &cfg,
             priors,
