@@ -18,8 +18,11 @@
 //! | F × N × 3 × f32 | vertex positions in the camera frame, metres, frame after frame |
 //!
 //! Cost: writing is 12 bytes per vertex per frame (10 kB for the default model's 837-vertex subset). A nearest
-//! query is two bounding-sphere passes over the triangles and an exact closest-point test (Ericson) on the few that
-//! pass: about 25 M flops for 837 queries against 1542 triangles, ~10 ms per frame scored.
+//! query bounds the answer by the exact distance to one triangle of its own cell (a uniform grid, each triangle
+//! binned in the cells its bounding sphere overlaps), then runs an exact closest-point test (Ericson) on the triangles
+//! of the cells within that bound whose sphere comes within it, in triangle order (the answer of one pass over all
+//! triangles, ties included): for the 837 vertices of a tracked torso about 50 sphere checks and 12 exact tests per
+//! query, 1.4x faster `eval tracking` than the two passes over all 1542 triangles it replaced (same figures).
 
 use crate::body::PosedBody;
 use crate::scene::shapes::vertex_normals;
@@ -224,18 +227,120 @@ pub struct Nearest {
     pub bary: [f32; 3],
 }
 
-/// A triangle mesh ready for exact nearest-point queries (bounding spheres per triangle), one frame of the torso.
+/// A triangle mesh ready for exact nearest-point queries (a bounding sphere per triangle, the triangles binned in a
+/// uniform grid), one frame of the torso.
 #[derive(Debug, Clone)]
 pub struct SurfaceQuery<'a> {
     vertices: &'a [[f32; 3]],
     triangles: &'a [[u32; 3]],
     spheres: Vec<([f32; 3], f32)>,
+    grid: SphereGrid,
+}
+
+/// The triangles binned in a uniform grid of cubes: each in every cell its bounding sphere's box overlaps, triangle
+/// indices ascending within each cell.
+#[derive(Debug, Clone)]
+struct SphereGrid {
+    origin: [f32; 3],
+    cell_m: f32,
+    dims: [usize; 3],
+    /// Cell `c`'s triangles are `order[starts[c]..starts[c + 1]]`.
+    starts: Vec<u32>,
+    order: Vec<u32>,
+}
+
+impl SphereGrid {
+    /// Cells twice the mean sphere radius wide (a surface's triangles then fill the cells it crosses a few at a
+    /// time) over the spheres' bounding box, at most 128 per axis.
+    fn new(spheres: &[([f32; 3], f32)]) -> SphereGrid {
+        let mut lo = [f32::INFINITY; 3];
+        let mut hi = [f32::NEG_INFINITY; 3];
+        let mut r_sum = 0.0f32;
+        for (c, r) in spheres {
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a] - r);
+                hi[a] = hi[a].max(c[a] + r);
+            }
+            r_sum += r;
+        }
+        if spheres.is_empty() {
+            (lo, hi) = ([0.0; 3], [0.0; 3]);
+        }
+        let extent = (0..3).map(|a| hi[a] - lo[a]).fold(0.0f32, f32::max);
+        let cell_m = (2.0 * r_sum / spheres.len().max(1) as f32)
+            .max(extent / 128.0)
+            .max(1e-4);
+        let dims = [0, 1, 2].map(|a| (((hi[a] - lo[a]) / cell_m) as usize + 1).min(128));
+        let mut grid = SphereGrid {
+            origin: lo,
+            cell_m,
+            dims,
+            starts: vec![0; dims.iter().product::<usize>() + 1],
+            order: Vec::new(),
+        };
+        // Two passes in triangle order (count, then fill), so each cell's list is ascending.
+        let boxes: Vec<([usize; 3], [usize; 3])> =
+            spheres.iter().map(|(c, r)| grid.cells_within(c, *r)).collect();
+        for &(lo, hi) in &boxes {
+            each_cell(dims, lo, hi, |cell| grid.starts[cell + 1] += 1);
+        }
+        for c in 1..grid.starts.len() {
+            grid.starts[c] += grid.starts[c - 1];
+        }
+        grid.order = vec![0; *grid.starts.last().unwrap_or(&0) as usize];
+        let mut fill = grid.starts.clone();
+        for (t, &(lo, hi)) in boxes.iter().enumerate() {
+            each_cell(dims, lo, hi, |cell| {
+                grid.order[fill[cell] as usize] = t as u32;
+                fill[cell] += 1;
+            });
+        }
+        grid
+    }
+
+    /// The cell index along axis `a` of coordinate `x`, clamped to the grid.
+    fn axis_cell(&self, a: usize, x: f32) -> usize {
+        let i = ((x - self.origin[a]) / self.cell_m).floor();
+        if i.is_nan() || i < 0.0 {
+            0
+        } else {
+            (i as usize).min(self.dims[a] - 1)
+        }
+    }
+
+    /// The box of cells (first and last per axis) overlapping the cube of half-width `r` around `p`.
+    fn cells_within(&self, p: &[f32; 3], r: f32) -> ([usize; 3], [usize; 3]) {
+        (
+            [0, 1, 2].map(|a| self.axis_cell(a, p[a] - r)),
+            [0, 1, 2].map(|a| self.axis_cell(a, p[a] + r)),
+        )
+    }
+
+    /// Call `f` with each cell index of the box `lo..=hi`.
+    fn for_each_cell(&self, lo: [usize; 3], hi: [usize; 3], f: impl FnMut(usize)) {
+        each_cell(self.dims, lo, hi, f);
+    }
+
+    /// The triangles binned in cell `cell`.
+    fn in_cell(&self, cell: usize) -> &[u32] {
+        &self.order[self.starts[cell] as usize..self.starts[cell + 1] as usize]
+    }
+}
+
+/// Call `f` with each cell index of the box `lo..=hi` of a grid of `dims` cells.
+fn each_cell(dims: [usize; 3], lo: [usize; 3], hi: [usize; 3], mut f: impl FnMut(usize)) {
+    for k in lo[2]..=hi[2] {
+        for j in lo[1]..=hi[1] {
+            let row = (k * dims[1] + j) * dims[0];
+            (lo[0]..=hi[0]).for_each(|i| f(row + i));
+        }
+    }
 }
 
 impl<'a> SurfaceQuery<'a> {
     /// Prepare `triangles` over `vertices` (indices already validated against `vertices.len()`).
     pub fn new(vertices: &'a [[f32; 3]], triangles: &'a [[u32; 3]]) -> SurfaceQuery<'a> {
-        let spheres = triangles
+        let spheres: Vec<([f32; 3], f32)> = triangles
             .iter()
             .map(|t| {
                 let [a, b, c] = t.map(|i| Vector3::from(vertices[i as usize]));
@@ -247,10 +352,12 @@ impl<'a> SurfaceQuery<'a> {
                 (centre.into(), r)
             })
             .collect();
+        let grid = SphereGrid::new(&spheres);
         SurfaceQuery {
             vertices,
             triangles,
             spheres,
+            grid,
         }
     }
 
@@ -264,25 +371,70 @@ impl<'a> SurfaceQuery<'a> {
         self.triangles
     }
 
+    /// The point of triangle `t` nearest to `p`, and its barycentric weights.
+    fn closest(&self, t: usize, p: &Point3<f32>) -> (Point3<f32>, [f32; 3]) {
+        let [a, b, c] = self.triangles[t].map(|i| Point3::from(self.vertices[i as usize]));
+        closest_on_triangle(p, &a, &b, &c)
+    }
+
+    /// Distance from `p` to triangle `t`.
+    fn distance_to(&self, t: usize, p: &Point3<f32>) -> f32 {
+        (p - self.closest(t, p).0).norm()
+    }
+
     /// The nearest surface point to `p` (exact; `None` for a mesh without triangles or a non-finite query).
     pub fn nearest(&self, p: &Point3<f32>) -> Option<Nearest> {
-        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) {
+        if !(p.x.is_finite() && p.y.is_finite() && p.z.is_finite()) || self.triangles.is_empty() {
             return None;
         }
-        // Every point of a triangle lies within its sphere: the nearest sphere's far side bounds the answer, and
-        // only triangles whose sphere comes nearer than the best so far need the exact test.
-        let mut bound = self
-            .spheres
-            .iter()
-            .map(|(c, r)| (p - Point3::from(*c)).norm() + r)
-            .fold(f32::INFINITY, f32::min);
+        let g = &self.grid;
+        let at = [p.x, p.y, p.z];
+        // Any triangle's distance bounds the answer: take the one whose sphere's far side is nearest among the
+        // triangles of the nearest non-empty ring of cells around p.
+        // Rings in cell indices around p's cell (clamped to the grid): a query far outside ends within the grid's
+        // size in rings, and one so far that every distance overflows takes every triangle.
+        let (mut far, mut first) = (f32::INFINITY, 0);
+        let home = g.cells_within(&at, 0.0).0;
+        for ring in 0.. {
+            let lo = home.map(|h| h.saturating_sub(ring));
+            let hi = [0, 1, 2].map(|a| (home[a] + ring).min(g.dims[a] - 1));
+            g.for_each_cell(lo, hi, |cell| {
+                for &t in g.in_cell(cell) {
+                    let (c, r) = self.spheres[t as usize];
+                    let f = (p - Point3::from(c)).norm() + r;
+                    if f < far {
+                        (far, first) = (f, t as usize);
+                    }
+                }
+            });
+            let whole = lo == [0; 3] && (0..3).all(|a| hi[a] == g.dims[a] - 1);
+            if far.is_finite() || whole {
+                break;
+            }
+        }
+        let mut bound = far.min(self.distance_to(first, p));
+        // Only triangles whose sphere comes within the bound can hold the answer, and each lies in the cells its
+        // sphere overlaps. They are tested in index order, as one pass over all triangles would, so ties go to the
+        // same triangle.
+        let mut candidates = Vec::new();
+        let (lo, hi) = g.cells_within(&at, bound);
+        g.for_each_cell(lo, hi, |cell| {
+            for &t in g.in_cell(cell) {
+                let (c, r) = self.spheres[t as usize];
+                if (p - Point3::from(c)).norm() - r <= bound {
+                    candidates.push(t as usize);
+                }
+            }
+        });
+        candidates.sort_unstable();
+        candidates.dedup();
         let mut best: Option<Nearest> = None;
-        for (t, (c, r)) in self.spheres.iter().enumerate() {
-            if (p - Point3::from(*c)).norm() - r > bound {
+        for t in candidates {
+            let (c, r) = self.spheres[t];
+            if (p - Point3::from(c)).norm() - r > bound {
                 continue;
             }
-            let [a, b, c] = self.triangles[t].map(|i| Point3::from(self.vertices[i as usize]));
-            let (q, bary) = closest_on_triangle(p, &a, &b, &c);
+            let (q, bary) = self.closest(t, p);
             let d = (p - q).norm();
             if best.is_none_or(|b| d < b.distance) {
                 bound = bound.min(d);
@@ -410,6 +562,59 @@ mod tests {
         let n = q.nearest(&Point3::new(0.05, 0.05, 0.02)).unwrap();
         assert!((n.distance - 0.02).abs() < 1e-6 && (n.point - Point3::new(0.05, 0.05, 0.0)).norm() < 1e-6);
         assert!(q.nearest(&Point3::new(f32::NAN, 0.0, 0.0)).is_none());
+    }
+
+    /// One pass over every triangle in index order, the first nearest kept: what the grid must reproduce bit for bit.
+    fn one_pass(v: &[[f32; 3]], t: &[[u32; 3]], p: &Point3<f32>) -> Option<Nearest> {
+        let mut best: Option<Nearest> = None;
+        for (i, tri) in t.iter().enumerate() {
+            let [a, b, c] = tri.map(|i| Point3::from(v[i as usize]));
+            let (q, bary) = closest_on_triangle(p, &a, &b, &c);
+            let d = (p - q).norm();
+            if best.is_none_or(|b| d < b.distance) {
+                best = Some(Nearest {
+                    point: q,
+                    distance: d,
+                    triangle: i,
+                    bary,
+                });
+            }
+        }
+        best
+    }
+
+    #[test]
+    fn nearest_is_the_one_pass_answer_on_a_bumpy_mesh() {
+        // A bumpy sheet whose last rows are stretched into long triangles, and queries on it, near it, far from it
+        // and on its vertices and edges (where neighbouring triangles tie).
+        let n = 24;
+        let mut v = grid(n).0;
+        for p in v.iter_mut() {
+            p[2] = 0.03 * (p[0] * 40.0).sin() * (p[1] * 25.0).cos();
+            if p[1] > 0.2 {
+                p[1] = 0.2 + (p[1] - 0.2) * 8.0;
+            }
+        }
+        let t = grid(n).1;
+        let q = SurfaceQuery::new(&v, &t);
+        let mut rng = supine_core::rng::SplitMix64(7);
+        let mut points: Vec<Point3<f32>> = v.iter().step_by(7).map(|p| Point3::from(*p)).collect();
+        points.extend(t.iter().step_by(5).map(|tri| {
+            let [a, b, _] = tri.map(|i| Point3::from(v[i as usize]));
+            Point3::from((a.coords + b.coords) / 2.0)
+        }));
+        for spread in [0.01f32, 0.1, 1.0, 5.0] {
+            for _ in 0..400 {
+                let mut c = || (rng.unit_f32() - 0.5) * spread;
+                points.push(Point3::new(0.1 + c(), 0.3 + c(), c()));
+            }
+        }
+        // Far outside the grid, where the nearest cells are empty.
+        points.push(Point3::new(1e30, -1e30, 3e29));
+        points.push(Point3::new(-40.0, 900.0, 0.0));
+        for p in &points {
+            assert_eq!(q.nearest(p), one_pass(&v, &t, p), "{p:?}");
+        }
     }
 
     #[test]
