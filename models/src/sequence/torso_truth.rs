@@ -390,9 +390,9 @@ impl<'a> SurfaceQuery<'a> {
         let g = &self.grid;
         let at = [p.x, p.y, p.z];
         // Any triangle's distance bounds the answer: take the one whose sphere's far side is nearest among the
-        // triangles of the nearest non-empty ring of cells around p.
-        // Rings in cell indices around p's cell (clamped to the grid): a query far outside ends within the grid's
-        // size in rings, and one so far that every distance overflows takes every triangle.
+        // triangles of the nearest non-empty ring of cells around p's cell (clamped to the grid). The rings count
+        // cells, so a query far outside ends within the grid's size, and one so far that every distance
+        // overflows takes every triangle.
         let (mut far, mut first) = (f32::INFINITY, 0);
         let home = g.cells_within(&at, 0.0).0;
         for ring in 0.. {
