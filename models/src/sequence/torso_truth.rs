@@ -316,11 +316,6 @@ impl SphereGrid {
         )
     }
 
-    /// Call `f` with each cell index of the box `lo..=hi`.
-    fn for_each_cell(&self, lo: [usize; 3], hi: [usize; 3], f: impl FnMut(usize)) {
-        each_cell(self.dims, lo, hi, f);
-    }
-
     /// The triangles binned in cell `cell`.
     fn in_cell(&self, cell: usize) -> &[u32] {
         &self.order[self.starts[cell] as usize..self.starts[cell + 1] as usize]
@@ -371,6 +366,12 @@ impl<'a> SurfaceQuery<'a> {
         self.triangles
     }
 
+    /// Distance from `p` to the centre of triangle `t`'s bounding sphere, and the sphere's radius.
+    fn to_sphere(&self, t: usize, p: &Point3<f32>) -> (f32, f32) {
+        let (c, r) = self.spheres[t];
+        ((p - Point3::from(c)).norm(), r)
+    }
+
     /// The point of triangle `t` nearest to `p`, and its barycentric weights.
     fn closest(&self, t: usize, p: &Point3<f32>) -> (Point3<f32>, [f32; 3]) {
         let [a, b, c] = self.triangles[t].map(|i| Point3::from(self.vertices[i as usize]));
@@ -398,10 +399,10 @@ impl<'a> SurfaceQuery<'a> {
         for ring in 0.. {
             let lo = home.map(|h| h.saturating_sub(ring));
             let hi = [0, 1, 2].map(|a| (home[a] + ring).min(g.dims[a] - 1));
-            g.for_each_cell(lo, hi, |cell| {
+            each_cell(g.dims, lo, hi, |cell| {
                 for &t in g.in_cell(cell) {
-                    let (c, r) = self.spheres[t as usize];
-                    let f = (p - Point3::from(c)).norm() + r;
+                    let (d, r) = self.to_sphere(t as usize, p);
+                    let f = d + r;
                     if f < far {
                         (far, first) = (f, t as usize);
                     }
@@ -416,22 +417,22 @@ impl<'a> SurfaceQuery<'a> {
         // Only triangles whose sphere comes within the bound can hold the answer, and each lies in the cells its
         // sphere overlaps. They are tested in index order, as one pass over all triangles would, so ties go to the
         // same triangle.
+        // Each candidate keeps its sphere's near side, which later skips it once a nearer triangle is found.
         let mut candidates = Vec::new();
         let (lo, hi) = g.cells_within(&at, bound);
-        g.for_each_cell(lo, hi, |cell| {
+        each_cell(g.dims, lo, hi, |cell| {
             for &t in g.in_cell(cell) {
-                let (c, r) = self.spheres[t as usize];
-                if (p - Point3::from(c)).norm() - r <= bound {
-                    candidates.push(t as usize);
+                let (d, r) = self.to_sphere(t as usize, p);
+                if d - r <= bound {
+                    candidates.push((t as usize, d - r));
                 }
             }
         });
-        candidates.sort_unstable();
-        candidates.dedup();
+        candidates.sort_unstable_by_key(|&(t, _)| t);
+        candidates.dedup_by_key(|&mut (t, _)| t);
         let mut best: Option<Nearest> = None;
-        for t in candidates {
-            let (c, r) = self.spheres[t];
-            if (p - Point3::from(c)).norm() - r > bound {
+        for (t, near) in candidates {
+            if near > bound {
                 continue;
             }
             let (q, bary) = self.closest(t, p);
