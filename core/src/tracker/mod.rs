@@ -33,6 +33,8 @@
 //! the model's front along its normals onto what a few well-seen frames show of this patient
 //! ([`TrackerConfig::surface`]). A lock refit chosen on a frame runs when the next frame arrives, on a copy of the
 //! chosen frame's depth ([`Scratch::refit_depth`]): the frame that locks has paid for the acquisition's fits.
+//! A lock whose fit keeps a high residual once the first round of refits is in is doubted ([`doubt`]): the init
+//! phase's shape goes back into the torso model and the tracker re-acquires, once per init phase.
 //!
 //! Three variants share the loop, for the evaluation of the paper's claim: [`Variant::Forest`] (the forest's points
 //! alone give the pose), [`Variant::ForestIcp`] (ICP from the forest each frame, no prior), and
@@ -47,6 +49,7 @@ pub mod accuracy;
 pub mod bed_search;
 pub mod bed_vote;
 pub mod budget;
+pub mod doubt;
 pub mod state;
 pub mod surface;
 pub mod torso_icp;
@@ -220,6 +223,20 @@ pub struct TrackerConfig {
     /// with the torso error 10.49 -> 10.41 mm and the probe error 10.71 -> 10.72 mm; 3 gave 3.91 ms, 10.55 mm and
     /// 10.78 mm (docs/tracking.md, "Lock refits on every second vertex").
     pub refit_stride: u16,
+    /// Doubt of a lock ([`doubt`]): once the first round of lock refits has been adopted, this many good tracked
+    /// frames in a row with a fit residual over [`TrackerConfig::doubt_rms_m`] drop the lock, once per init phase:
+    /// the torso model goes back to the init phase's shape and the tracker re-acquires (0: off). 8 since 2026-12-06:
+    /// after its refits a wrong lock keeps fitting at 6-13 mm while a right one settles at 3-5 mm; on the choice sets
+    /// 34001-34100 / 70001-70200 / 72001-72250's 61 raised beds the torso error went 11.78 / 11.98 / 12.37 -> 11.29 /
+    /// 11.72 / 11.69 mm, the probe error 11.16 / 12.21 / 12.71 -> 11.03 / 12.02 / 12.34 mm, and the frames tracked
+    /// more than 30 mm off 11-14 % fewer; the tracked share fell 0.1-0.5 % (a dropped lock re-acquires, sometimes
+    /// only after the full occlusion). Under tracker seed 1 smaller and mixed (torso +0.11 / -0.17 / -0.23 mm,
+    /// tracked -0.3 to -1.1 %); docs/tracking.md, thirty-third round.
+    pub doubt_frames: u16,
+    /// The residual of [`TrackerConfig::doubt_frames`], metres: 7.5 mm (8.5 mm gained as much on 72001-72250's 61 and
+    /// 0.2 mm less on 34001-34100; 6 mm counted only once every refit round was in fired late, on right tracks during
+    /// the patient's motion, and gained nothing).
+    pub doubt_rms_m: f32,
     /// The screening of the bed grid's starts ([`bed_search`], in acquisitions and the init phase's shape fit)
     /// uses every `screen_stride`-th torso vertex (1: all); the starts it keeps are refined on every vertex. 4 since
     /// 2026-12-05: the screening was most of an acquisition frame's ICP time, and acquisitions were most of the
@@ -304,6 +321,8 @@ impl Default for TrackerConfig {
             refit_bed_contact: None,
             refit_lambda: 0.01,
             refit_stride: 2,
+            doubt_frames: 8,
+            doubt_rms_m: 0.0075,
             screen_stride: 4,
             occluded_hold_rotation: 0.3,
             surface: SurfaceConfig::default(),
@@ -477,6 +496,9 @@ struct Init {
     /// Frames the surface adaptation's round has summed, and its rounds applied.
     surface_n: u16,
     surface_rounds: u8,
+    /// The init phase's shape estimate (what a doubted lock's torso model goes back to) and the doubt's count.
+    init_shape: Option<[f32; SHAPE_COMPONENTS]>,
+    doubt: doubt::LockDoubt,
 }
 
 impl Init {
@@ -496,6 +518,8 @@ impl Init {
             round: 0,
             surface_n: 0,
             surface_rounds: 0,
+            init_shape: None,
+            doubt: doubt::LockDoubt::new(),
         }
     }
 }
@@ -1055,6 +1079,7 @@ impl<'m, 's> Tracker<'m, 's> {
                 }
             }
         }
+        self.init.init_shape = Some(z);
         let Some(torso) = self.shaped_torso(*bed, z) else {
             // The scratch lengths were checked when the tracker was built.
             return;
@@ -1163,6 +1188,46 @@ impl<'m, 's> Tracker<'m, 's> {
             self.init.refit_n = 0;
             self.init.refit_pose = None;
         }
+    }
+
+    /// Feed the [`doubt`] with this frame's fit; when it fires, drop the lock: the init phase's shape back in the
+    /// torso model (the surface adaptation's displacements and the lock refits' rounds undone), the state lost so the
+    /// next frame re-acquires from scratch. Returns whether it fired.
+    fn doubts_lock(&mut self, quality: FitQuality, fit: &TorsoFit, bed: &BedScene) -> bool {
+        // Counted once the first round of lock refits is in: before it the init phase's shape fits right locks
+        // at 5-9 mm too.
+        let refitted =
+            self.init.round + u8::from(self.init.refits_left == 0) >= 1 && self.pending_refit.is_none();
+        let good = quality == FitQuality::Good && self.machine.state() == TrackerState::Tracking;
+        let observed = (self.cfg.lock_refits > 0 && refitted).then_some((good, fit.association.rms_m()));
+        let Some(z) = self.init.init_shape else {
+            return false;
+        };
+        if !self
+            .init
+            .doubt
+            .observe(observed, self.cfg.doubt_rms_m, self.cfg.doubt_frames)
+        {
+            return false;
+        }
+        self.scratch.surface_sums.fill(VertexSums::ZERO);
+        if let Some(torso) = self.shaped_torso(*bed, z) {
+            self.adopt_torso(torso, None);
+        }
+        self.init.refits_left = self.cfg.lock_refits;
+        self.init.round = 0;
+        self.init.refit_sum = [0.0; SHAPE_COMPONENTS];
+        self.init.refit_n = 0;
+        self.init.refit_pose = None;
+        self.init.waited = 0;
+        self.init.surface_rounds = 0;
+        self.pose = None;
+        self.last_good_pose = None;
+        self.candidate = None;
+        self.switch_candidate = None;
+        self.support_ref = None;
+        self.machine.lose();
+        true
     }
 
     /// One frame of the surface adaptation ([`surface`]) from the tracked pose; after
@@ -1571,6 +1636,9 @@ impl<'m, 's> Tracker<'m, 's> {
             if self.machine.state() == TrackerState::Lost {
                 self.pose = None;
             }
+            return;
+        }
+        if variant == Variant::ForestIcpFeedback && self.doubts_lock(quality, &report.fit, &t.bed) {
             return;
         }
         if self.init.refits_left > 0 {

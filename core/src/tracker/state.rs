@@ -11,6 +11,7 @@
 //! | tracking | a good fit | tracking (degraded when the budget cut work) |
 //! | tracking | too little torso visible | occluded |
 //! | tracking | a failed fit, `lost_after` frames in a row | lost |
+//! | tracking | the lock doubted: a run of high residuals after the first lock refits, once per init ([`super::doubt`]) | lost |
 //! | occluded | a good fit | tracking |
 //! | occluded | still hidden or failing, `coast_frames` frames in a row | lost |
 //! | lost | the next frame | reacquiring |
@@ -110,6 +111,15 @@ impl StateMachine {
         self.coast_run = 0;
     }
 
+    /// The tracker doubts its lock ([`super::doubt`]): the patient counts as lost and the next frame re-acquires.
+    pub fn lose(&mut self) {
+        if self.initialised {
+            self.state = TrackerState::Lost;
+            self.failed_run = 0;
+            self.coast_run = 0;
+        }
+    }
+
     /// A usable frame arrived; returns the state it is processed in (leaving sensor_fault or lost).
     pub fn frame_arrived(&mut self) -> TrackerState {
         self.state = match self.state {
@@ -182,6 +192,20 @@ mod tests {
         m.init_done();
         assert_eq!(m.fitted(FitQuality::Good, false), S::Tracking);
         m
+    }
+
+    #[test]
+    fn a_doubted_lock_is_lost_and_the_next_frame_reacquires() {
+        let mut m = StateMachine::new(StateLimits::default());
+        // Before init there is no lock to doubt.
+        m.lose();
+        assert_eq!(m.state(), S::Initialising);
+        let mut m = tracking();
+        m.lose();
+        assert_eq!(m.state(), S::Lost);
+        assert!(!m.has_pose());
+        assert_eq!(m.frame_arrived(), S::Reacquiring);
+        assert_eq!(m.fitted(FitQuality::Good, false), S::Tracking);
     }
 
     #[test]

@@ -117,6 +117,10 @@ pub struct TrackingEvalArgs {
     /// tracker's).
     #[arg(long)]
     pub refit_stride: Option<u16>,
+    /// The tracker's `doubt_frames`: good tracked frames in a row with a residual over 7.5 mm, once the first lock
+    /// refits are in, that drop the lock once (default: the tracker's, 8 since 2026-12-06; 0: off, as before)
+    #[arg(long)]
+    pub doubt_frames: Option<u16>,
     /// The tracker's `screen_stride`: the screening of the bed grid's starts (acquisitions, the init phase's shape
     /// fit) uses every N-th torso vertex (default: the tracker's, 4; 1 gives the tracker before 2026-12-05's
     /// nineteenth round).
@@ -439,6 +443,9 @@ pub fn run_variant(
     }
     if let Some(n) = args.refit_stride {
         cfg.refit_stride = n;
+    }
+    if let Some(n) = args.doubt_frames {
+        cfg.doubt_frames = n;
     }
     if let Some(n) = args.screen_stride {
         cfg.screen_stride = n;
