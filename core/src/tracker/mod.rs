@@ -502,6 +502,14 @@ struct Init {
 }
 
 impl Init {
+    /// A round of `refits` lock refits to run, from nothing summed.
+    fn start_refit_round(&mut self, refits: u8) {
+        self.refits_left = refits;
+        self.refit_sum = [0.0; SHAPE_COMPONENTS];
+        self.refit_n = 0;
+        self.refit_pose = None;
+    }
+
     const fn new() -> Self {
         Init {
             bed: None,
@@ -795,6 +803,11 @@ impl<'m, 's> Tracker<'m, 's> {
         self.machine.reinitialise();
         self.init = Init::new();
         self.torso = None;
+        self.forget_lock();
+    }
+
+    /// Forget the pose and what the acquisition and tracking carry between frames (re-initialise, a doubted lock).
+    fn forget_lock(&mut self) {
         self.pose = None;
         self.last_good_pose = None;
         self.candidate = None;
@@ -1183,10 +1196,7 @@ impl<'m, 's> Tracker<'m, 's> {
         // that starts after `refit_late_frames` takes the late visibility gate at once (as measured).
         if self.init.round < self.cfg.refit_rounds {
             self.init.round += 1;
-            self.init.refits_left = self.cfg.lock_refits;
-            self.init.refit_sum = [0.0; SHAPE_COMPONENTS];
-            self.init.refit_n = 0;
-            self.init.refit_pose = None;
+            self.init.start_refit_round(self.cfg.lock_refits);
         }
     }
 
@@ -1214,18 +1224,11 @@ impl<'m, 's> Tracker<'m, 's> {
         if let Some(torso) = self.shaped_torso(*bed, z) {
             self.adopt_torso(torso, None);
         }
-        self.init.refits_left = self.cfg.lock_refits;
+        self.init.start_refit_round(self.cfg.lock_refits);
         self.init.round = 0;
-        self.init.refit_sum = [0.0; SHAPE_COMPONENTS];
-        self.init.refit_n = 0;
-        self.init.refit_pose = None;
         self.init.waited = 0;
         self.init.surface_rounds = 0;
-        self.pose = None;
-        self.last_good_pose = None;
-        self.candidate = None;
-        self.switch_candidate = None;
-        self.support_ref = None;
+        self.forget_lock();
         self.machine.lose();
         true
     }
