@@ -107,17 +107,21 @@ impl StateMachine {
     pub fn init_done(&mut self) {
         self.initialised = true;
         self.state = TrackerState::Acquiring;
-        self.failed_run = 0;
-        self.coast_run = 0;
+        self.clear_runs();
     }
 
     /// The tracker doubts its lock ([`super::doubt`]): the patient counts as lost and the next frame re-acquires.
     pub fn lose(&mut self) {
         if self.initialised {
             self.state = TrackerState::Lost;
-            self.failed_run = 0;
-            self.coast_run = 0;
+            self.clear_runs();
         }
+    }
+
+    /// No failed or coasting frames counted: a state entered afresh.
+    fn clear_runs(&mut self) {
+        self.failed_run = 0;
+        self.coast_run = 0;
     }
 
     /// A usable frame arrived; returns the state it is processed in (leaving sensor_fault or lost).
@@ -156,10 +160,7 @@ impl StateMachine {
             }
         };
         match quality {
-            FitQuality::Good => {
-                self.failed_run = 0;
-                self.coast_run = 0;
-            }
+            FitQuality::Good => self.clear_runs(),
             FitQuality::Occluded => {
                 self.failed_run = 0;
                 self.coast_run = self.coast_run.saturating_add(1);
@@ -172,8 +173,7 @@ impl StateMachine {
             }
         }
         if self.state == S::Lost {
-            self.failed_run = 0;
-            self.coast_run = 0;
+            self.clear_runs();
         }
         self.state
     }
