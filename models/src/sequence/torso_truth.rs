@@ -19,10 +19,11 @@
 //!
 //! Cost: writing is 12 bytes per vertex per frame (10 kB for the default model's 837-vertex subset). A nearest
 //! query bounds the answer by the exact distance to one triangle of its own cell (a uniform grid, each triangle
-//! binned in the cells its bounding sphere overlaps; every triangle's sphere when that cell is empty), then runs an exact closest-point test (Ericson) on the triangles
-//! of the cells within that bound whose sphere comes within it, in triangle order (the answer of one pass over all
-//! triangles, ties included): for the 837 vertices of a tracked torso about 50 sphere checks and 12 exact tests per
-//! query, 1.4x faster `eval tracking` than the two passes over all 1542 triangles it replaced (same figures).
+//! binned in the cells its bounding sphere overlaps), or of all triangles when that cell is empty, then runs an
+//! exact closest-point test (Ericson) on the triangles of the cells within that bound whose sphere comes within it,
+//! in triangle order (the answer of one pass over all triangles, ties included): for the 837 vertices of a tracked
+//! torso about 50 sphere checks and 12 exact tests per query, 1.4x faster `eval tracking` than the two passes over
+//! all 1542 triangles it replaced (same figures).
 
 use crate::body::PosedBody;
 use crate::scene::shapes::vertex_normals;
