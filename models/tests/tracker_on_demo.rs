@@ -570,3 +570,61 @@ fn bad_frames_lead_to_defined_states() {
         TrackerState::Initialising
     );
 }
+
+/// The states the demo's first 60 frames report and the shape-packet revisions they send, with `cfg`; the
+/// tracker's shape after them.
+fn states_and_revisions(models: &Models<'_>, cfg: TrackerConfig) -> (Vec<TrackerState>, Vec<u8>, [f32; 20]) {
+    let mut states = Vec::new();
+    let mut revisions = Vec::new();
+    let mut shape = None;
+    track_demo(models, cfg, 60, None, |_, tracker, r| {
+        states.push(r.state);
+        for p in r.packets.iter() {
+            if let Body::BodyShape(b) = p.body
+                && revisions.last() != Some(&b.revision)
+            {
+                revisions.push(b.revision);
+            }
+        }
+        shape = tracker.shape().copied();
+    });
+    (states, revisions, shape.expect("init finished"))
+}
+
+#[test]
+fn a_known_shape_is_never_doubted_or_refitted() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    // Every good tracked frame's residual over the doubt's bar: the doubt fires as soon as it counts.
+    let doubting = TrackerConfig {
+        doubt_rms_m: 0.0,
+        ..config(&seq)
+    };
+    let lost_after_tracking = |states: &[TrackerState]| {
+        let first = states.iter().position(|s| *s == TrackerState::Tracking);
+        first.is_some_and(|i| states[i..].contains(&TrackerState::Lost))
+    };
+    // The control: an estimated shape is doubted once its refits are in, and the lock is dropped.
+    let (states, revisions, _) = states_and_revisions(&models, doubting);
+    assert!(lost_after_tracking(&states), "{states:?}");
+    assert!(revisions.len() > 1, "{revisions:?}");
+    // A known shape (a frozen one kept over a re-initialise) plans no lock refits, so it is never doubted: the
+    // refits the doubt would start replaced it before 2026-12-07.
+    let mut known = [0.0; 20];
+    known
+        .iter_mut()
+        .zip(&seq.meta.shape)
+        .for_each(|(o, s)| *o = *s + 0.5);
+    let (states, revisions, shape) = states_and_revisions(
+        &models,
+        TrackerConfig {
+            known_shape: Some(known),
+            ..doubting
+        },
+    );
+    assert!(states.contains(&TrackerState::Tracking), "{states:?}");
+    assert!(!lost_after_tracking(&states), "{states:?}");
+    assert_eq!(revisions, [1]);
+    assert_eq!(shape, known);
+}

@@ -223,9 +223,10 @@ pub struct TrackerConfig {
     /// with the torso error 10.49 -> 10.41 mm and the probe error 10.71 -> 10.72 mm; 3 gave 3.91 ms, 10.55 mm and
     /// 10.78 mm (docs/tracking.md, "Lock refits on every second vertex").
     pub refit_stride: u16,
-    /// Doubt of a lock ([`doubt`]): once the first round of lock refits has been adopted, this many good tracked
-    /// frames in a row with a fit residual over [`TrackerConfig::doubt_rms_m`] drop the lock, once per init phase:
-    /// the torso model goes back to the init phase's shape and the tracker re-acquires (0: off). 8 since 2026-12-06:
+    /// Doubt of a lock ([`doubt`]): once the first round of lock refits has run, this many good tracked frames in
+    /// a row with a fit residual over [`TrackerConfig::doubt_rms_m`] drop the lock, once per init phase: the torso
+    /// model goes back to the init phase's shape and the tracker re-acquires (0: off). A known shape
+    /// ([`TrackerConfig::known_shape`]) runs no refits and is never doubted. 8 since 2026-12-06:
     /// after its refits a wrong lock keeps fitting at 6-13 mm while a right one settles at 3-5 mm; on the choice sets
     /// 34001-34100 / 70001-70200 / 72001-72250's 61 raised beds the torso error went 11.78 / 11.98 / 12.37 -> 11.29 /
     /// 11.72 / 11.69 mm, the probe error 11.16 / 12.21 / 12.71 -> 11.03 / 12.02 / 12.34 mm, and the frames tracked
@@ -493,6 +494,9 @@ struct Init {
     settled: u16,
     /// Lock refit rounds completed after the first ([`TrackerConfig::refit_rounds`]).
     round: u8,
+    /// Whether a round of lock refits has run since the init phase (or the doubt) set the torso model: what the
+    /// [`doubt`] waits for. A known shape plans no refits, so its locks are never doubted.
+    refits_in: bool,
     /// Frames the surface adaptation's round has summed, and its rounds applied.
     surface_n: u16,
     surface_rounds: u8,
@@ -524,6 +528,7 @@ impl Init {
             waited: 0,
             settled: 0,
             round: 0,
+            refits_in: false,
             surface_n: 0,
             surface_rounds: 0,
             init_shape: None,
@@ -1158,6 +1163,7 @@ impl<'m, 's> Tracker<'m, 's> {
             return;
         }
         self.init.refits_left -= 1;
+        self.init.refits_in |= self.init.refits_left == 0;
         let body = self.models.body;
         // From a confirmed pose: drop pairs the camera sees far behind the model, as the temporal fit does. Plain
         // fitting (no pull toward the init estimate, only λ's toward the mean body): on the validation sequences
@@ -1205,9 +1211,9 @@ impl<'m, 's> Tracker<'m, 's> {
     /// next frame re-acquires from scratch. Returns whether it fired.
     fn doubts_lock(&mut self, quality: FitQuality, fit: &TorsoFit, bed: &BedScene) -> bool {
         // Counted once the first round of lock refits is in: before it the init phase's shape fits right locks
-        // at 5-9 mm too.
-        let refitted =
-            self.init.round + u8::from(self.init.refits_left == 0) >= 1 && self.pending_refit.is_none();
+        // at 5-9 mm too. A known shape runs no refits: had its locks been doubted, the refits the doubt starts
+        // would have replaced it.
+        let refitted = self.init.refits_in && self.pending_refit.is_none();
         let good = quality == FitQuality::Good && self.machine.state() == TrackerState::Tracking;
         let observed = (self.cfg.lock_refits > 0 && refitted).then_some((good, fit.association.rms_m()));
         let Some(z) = self.init.init_shape else {
@@ -1226,6 +1232,7 @@ impl<'m, 's> Tracker<'m, 's> {
         }
         self.init.start_refit_round(self.cfg.lock_refits);
         self.init.round = 0;
+        self.init.refits_in = false;
         self.init.waited = 0;
         self.init.surface_rounds = 0;
         self.forget_lock();
