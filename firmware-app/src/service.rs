@@ -162,9 +162,7 @@ pub fn serve(c: &Checked, mut outputs: Option<&mut FoxgloveOutputs>) -> Result<S
                         Command::Stop => sending = false,
                         Command::SetShapeMode(mode) => {
                             shape_mode = mode;
-                            if mode == ShapeMode::Continuous {
-                                warn!("shape mode continuous is not supported; the shape is estimated once");
-                            }
+                            tracker.set_shape_mode(mode);
                         }
                         _ => warn!(?cmd, "command not understood by this build"),
                     }

@@ -1,8 +1,8 @@
 //! The real-time tracker (`supine_core::tracker`) on the committed demo recording with the committed default
 //! models: it initialises and tracks, allocates nothing per frame, replays bit-identically, ICP converges back from
 //! a known perturbation, the shape refit on lock (in rounds) moves the shape toward the truth and fits the frame it
-//! was chosen on though the next frame runs it, and bad frames (empty, wrong size, no patient) lead to defined
-//! states.
+//! was chosen on though the next frame runs it, the shape modes keep the shape or go on refitting it (and a known
+//! shape is never doubted), and bad frames (empty, wrong size, no patient) lead to defined states.
 
 use std::path::Path;
 use supine_core::camera::Intrinsics;
@@ -13,7 +13,7 @@ use supine_core::time::{Timestamp, VirtualClock};
 use supine_core::tracker::budget::Stopwatch;
 use supine_core::tracker::torso_icp::{self, TorsoIcpConfig};
 use supine_core::tracker::{FrameReport, Models, ScratchSizes, Tracker, TrackerConfig};
-use supine_core::wire::{Body, Message, TrackerState};
+use supine_core::wire::{Body, Message, ShapeMode, TrackerState};
 use supine_drivers::SourceErrorKind;
 use supine_drivers::oni::OniReader;
 use supine_drivers::tracker_host::{ModelFiles, TrackerScratch};
@@ -627,4 +627,97 @@ fn a_known_shape_is_never_doubted_or_refitted() {
     assert!(!lost_after_tracking(&states), "{states:?}");
     assert_eq!(revisions, [1]);
     assert_eq!(shape, known);
+}
+
+/// What a run of `n` demo frames (forth and back) with `cfg` did to the shape: the frame each new body-shape
+/// revision was first sent on, and the states; `switch` sets a shape mode before the given frame.
+fn shape_revisions(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    n: usize,
+    switch: Option<(usize, ShapeMode)>,
+) -> (Vec<(usize, u8)>, Vec<TrackerState>) {
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let (mut revisions, mut states) = (Vec::new(), Vec::new());
+    let period = 2 * (frames.len() - 1);
+    for i in 0..n {
+        if let Some((at, mode)) = switch
+            && at == i
+        {
+            tracker.set_shape_mode(mode);
+        }
+        let j = i % period;
+        let j = if j < frames.len() { j } else { period - j };
+        let t = Timestamp::from_us(1 + i as u64 * 33_333).unwrap();
+        clock.set(t);
+        let r = tracker.process(&frame(&frames[j].0, t, i as u32), None, &clock);
+        states.push(r.state);
+        for p in r.packets.iter() {
+            if let Body::BodyShape(b) = p.body
+                && revisions.last().map(|&(_, v)| v) != Some(b.revision)
+            {
+                revisions.push((i, b.revision));
+            }
+        }
+    }
+    (revisions, states)
+}
+
+#[test]
+fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let only = |r: &[(usize, u8)]| r.iter().map(|&(_, v)| v).collect::<Vec<_>>();
+    // Once (the default): the init phase's shape, then one revision per round of lock refits, then no more.
+    let rounds = usize::from(TrackerConfig::default().refit_rounds) + 1;
+    let (once, _) = shape_revisions(&models, config(&seq), 240, None);
+    assert_eq!(only(&once).len(), 1 + rounds, "{once:?}");
+    // Continuous: further rounds, each after at least `continuous_refit_frames` good tracked frames.
+    let every = 40;
+    let continuous = TrackerConfig {
+        shape_mode: ShapeMode::Continuous,
+        continuous_refit_frames: every,
+        ..config(&seq)
+    };
+    let (more, states) = shape_revisions(&models, continuous, 240, None);
+    assert_eq!(
+        more[..=rounds],
+        once[..=rounds],
+        "the configured rounds as in once"
+    );
+    assert!(more.len() >= 1 + rounds + 2, "{more:?} {states:?}");
+    for w in more[rounds..].windows(2) {
+        assert!(w[1].0 - w[0].0 > usize::from(every), "{more:?}");
+    }
+    // Frozen from the start: the init phase's shape, never revised.
+    let frozen = TrackerConfig {
+        shape_mode: ShapeMode::Frozen,
+        ..config(&seq)
+    };
+    let (kept, states) = shape_revisions(&models, frozen, 240, None);
+    assert_eq!(only(&kept), [1]);
+    assert!(states.contains(&TrackerState::Tracking));
+    // Frozen once tracking has begun: a round under way is dropped, not adopted.
+    let first_refit = once[1].0;
+    let (dropped, _) = shape_revisions(
+        &models,
+        config(&seq),
+        240,
+        Some((first_refit - 1, ShapeMode::Frozen)),
+    );
+    assert_eq!(only(&dropped), [1]);
+    // Continuous switched on after the configured rounds are over starts a further round.
+    let (on, _) = shape_revisions(
+        &models,
+        config(&seq),
+        240,
+        Some((once[rounds].0 + 1, ShapeMode::Continuous)),
+    );
+    assert_eq!(on[..=rounds], once[..=rounds]);
+    assert!(on.len() > 1 + rounds, "{on:?}");
 }

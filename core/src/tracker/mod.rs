@@ -34,7 +34,9 @@
 //! ([`TrackerConfig::surface`]). A lock refit chosen on a frame runs when the next frame arrives, on a copy of the
 //! chosen frame's depth ([`Scratch::refit_depth`]): the frame that locks has paid for the acquisition's fits.
 //! A lock whose fit keeps a high residual once the first round of refits is in is doubted ([`doubt`]): the init
-//! phase's shape goes back into the torso model and the tracker re-acquires, once per init phase.
+//! phase's shape goes back into the torso model and the tracker re-acquires, once per init phase. The shape mode
+//! ([`TrackerConfig::shape_mode`], the arm controller's command) keeps the shape as it is (frozen) or goes on
+//! refitting it every few seconds while tracking (continuous).
 //!
 //! Three variants share the loop, for the evaluation of the paper's claim: [`Variant::Forest`] (the forest's points
 //! alone give the pose), [`Variant::ForestIcp`] (ICP from the forest each frame, no prior), and
@@ -77,8 +79,8 @@ use crate::shape::combine::{MAX_SHAPE_FRAMES, ShapeCombine};
 use crate::time::{Clock, Timestamp};
 use crate::torso::{self, TorsoBuffers, TorsoSurface};
 use crate::wire::{
-    self, BodyRegion, BodyShape, Confidence, Health, Message, SalientPointReport, SalientPoints, TorsoPose,
-    TrackerState, UnitQuatQ14,
+    self, BodyRegion, BodyShape, Confidence, Health, Message, SalientPointReport, SalientPoints, ShapeMode,
+    TorsoPose, TrackerState, UnitQuatQ14,
 };
 use budget::{BudgetConfig, BudgetCounters, Stage, StageTimes, Stopwatch};
 use state::{FitQuality, StateLimits, StateMachine};
@@ -201,6 +203,15 @@ pub struct TrackerConfig {
     /// tracked frames with the adopted shape: 10. On the validation sequences with one further round: 3 gave 10.95
     /// mm (s4004 refit from a pose still sliding: +21 mm), 10 gave 10.38, 20 gave 10.44, 30 gave 10.70 mm.
     pub refit_settle_frames: u16,
+    /// What the tracker does with the shape after the init phase (the wire's shape mode, set by the arm controller's
+    /// command): [`ShapeMode::Once`], the default, runs the lock refits' rounds and then keeps the shape;
+    /// [`ShapeMode::Frozen`] keeps the shape it has (no further refits, no doubt; the service also keeps it over a
+    /// re-initialise, as [`TrackerConfig::known_shape`]); [`ShapeMode::Continuous`] goes on with a round of lock
+    /// refits every [`TrackerConfig::continuous_refit_frames`] good tracked frames after the configured rounds.
+    pub shape_mode: ShapeMode,
+    /// In [`ShapeMode::Continuous`], the consecutive good tracked frames with the current shape a further round of
+    /// lock refits waits for: 90 (3 s at 30 Hz), so a revision is sent at most every few seconds.
+    pub continuous_refit_frames: u16,
     /// The lock refits' visibility gate once [`TrackerConfig::refit_late_frames`] have passed: 0.4. On the 46
     /// validation sequences, after 30 frames, 0.4 moved the torso error 11.28 -> 10.90 mm and the probe error 9.46 ->
     /// 9.27 mm, four sequences gaining more than 0.5 mm and none losing; 0.3 and 0.35 refit s619 on its own arms
@@ -318,6 +329,8 @@ impl Default for TrackerConfig {
             refit_late_frames: 30,
             refit_rounds: 2,
             refit_settle_frames: 10,
+            shape_mode: ShapeMode::Once,
+            continuous_refit_frames: 90,
             refit_late_min_visible: 0.4,
             refit_bed_contact: None,
             refit_lambda: 0.01,
@@ -646,9 +659,15 @@ fn refit_gate(cfg: &TrackerConfig, waited: u16) -> f32 {
 }
 
 /// The consecutive good tracked frames (this one included) a lock refit of round `round` (0: the first) needs
-/// beyond the first: none in the first round, [`TrackerConfig::refit_settle_frames`] in the later ones.
+/// beyond the first: none in the first round, [`TrackerConfig::refit_settle_frames`] in the later ones, and at least
+/// [`TrackerConfig::continuous_refit_frames`] in the rounds past [`TrackerConfig::refit_rounds`]
+/// ([`ShapeMode::Continuous`]).
 fn refit_settle(cfg: &TrackerConfig, round: u8) -> u16 {
-    if round == 0 { 0 } else { cfg.refit_settle_frames }
+    match round {
+        0 => 0,
+        r if r <= cfg.refit_rounds => cfg.refit_settle_frames,
+        _ => cfg.refit_settle_frames.max(cfg.continuous_refit_frames),
+    }
 }
 
 /// Per good tracking frame, the share by which the reference support follows the fit's (a slow follow: a pose
@@ -801,6 +820,27 @@ impl<'m, 's> Tracker<'m, 's> {
     /// Use `shape` (σ units) instead of estimating one at the next init phase (`None`: estimate it).
     pub fn set_known_shape(&mut self, shape: Option<[f32; SHAPE_COMPONENTS]>) {
         self.cfg.known_shape = shape;
+    }
+
+    /// Switch the shape mode ([`TrackerConfig::shape_mode`]) from the next frame on. Frozen drops the lock refits
+    /// still to run (a round half summed is not adopted); continuous starts a round when none is under way once the
+    /// init phase is done (the first at once when none has run, a later one after
+    /// [`TrackerConfig::continuous_refit_frames`]).
+    pub fn set_shape_mode(&mut self, mode: ShapeMode) {
+        self.cfg.shape_mode = mode;
+        match mode {
+            ShapeMode::Frozen => {
+                self.init.refits_left = 0;
+                self.pending_refit = None;
+            }
+            ShapeMode::Continuous if self.torso.is_some() && self.init.refits_left == 0 => {
+                if self.init.refits_in {
+                    self.init.round = self.init.round.max(self.cfg.refit_rounds).saturating_add(1);
+                }
+                self.init.start_refit_round(self.cfg.lock_refits);
+            }
+            _ => {}
+        }
     }
 
     /// Drop the track and run the init phase again (the re-initialise command).
@@ -1110,10 +1150,11 @@ impl<'m, 's> Tracker<'m, 's> {
             self.last_good_pose = pose;
             self.candidate = pose.map(|p| (p, 1));
         }
-        self.init.refits_left = if observed.is_some() {
-            self.cfg.lock_refits
-        } else {
-            0
+        // A known shape runs no refits unless the shape is to be refined continuously.
+        self.init.refits_left = match self.cfg.shape_mode {
+            ShapeMode::Once if observed.is_some() => self.cfg.lock_refits,
+            ShapeMode::Continuous => self.cfg.lock_refits,
+            _ => 0,
         };
         self.machine.init_done();
     }
@@ -1200,8 +1241,8 @@ impl<'m, 's> Tracker<'m, 's> {
         self.support_ref = None;
         // The next round starts from this shape once the tracker has settled with it. `waited` runs on, so a round
         // that starts after `refit_late_frames` takes the late visibility gate at once (as measured).
-        if self.init.round < self.cfg.refit_rounds {
-            self.init.round += 1;
+        if self.init.round < self.cfg.refit_rounds || self.cfg.shape_mode == ShapeMode::Continuous {
+            self.init.round = self.init.round.saturating_add(1);
             self.init.start_refit_round(self.cfg.lock_refits);
         }
     }
@@ -1213,7 +1254,8 @@ impl<'m, 's> Tracker<'m, 's> {
         // Counted once the first round of lock refits is in: before it the init phase's shape fits right locks
         // at 5-9 mm too. A known shape runs no refits: had its locks been doubted, the refits the doubt starts
         // would have replaced it.
-        let refitted = self.init.refits_in && self.pending_refit.is_none();
+        let refitted =
+            self.init.refits_in && self.pending_refit.is_none() && self.cfg.shape_mode != ShapeMode::Frozen;
         let good = quality == FitQuality::Good && self.machine.state() == TrackerState::Tracking;
         let observed = (self.cfg.lock_refits > 0 && refitted).then_some((good, fit.association.rms_m()));
         let Some(z) = self.init.init_shape else {

@@ -211,6 +211,11 @@ macro_rules! wire_enum {
                     $($name::$var => $text,)+
                 }
             }
+
+            /// The variant that [`Self::name`] spells `name`, if any.
+            pub fn from_name(name: &str) -> Option<Self> {
+                Self::ALL.iter().copied().find(|v| v.name() == name)
+            }
         }
 
         impl TryFrom<u8> for $name {
@@ -336,5 +341,18 @@ mod tests {
         assert_eq!(BodyRegion::from_u8(10), None);
         assert_eq!(ShapeMode::from_u8(3), None);
         assert_eq!(TrackerState::SensorFault.name(), "sensor_fault");
+    }
+
+    #[test]
+    fn enums_round_trip_their_names() {
+        for &m in ShapeMode::ALL {
+            assert_eq!(ShapeMode::from_name(m.name()), Some(m));
+        }
+        for &r in BodyRegion::ALL {
+            assert_eq!(BodyRegion::from_name(r.name()), Some(r));
+        }
+        assert_eq!(ShapeMode::from_name("continuous"), Some(ShapeMode::Continuous));
+        assert_eq!(ShapeMode::from_name("Continuous"), None);
+        assert_eq!(TrackerState::from_name(""), None);
     }
 }

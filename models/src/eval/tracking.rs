@@ -40,6 +40,7 @@ use supine_core::tracker::accuracy::{self, TrackedFrame, TruthFrame};
 use supine_core::tracker::budget::{Stage, Stopwatch};
 use supine_core::tracker::torso_icp;
 use supine_core::tracker::{ArmSample, FrameReport, Models, ScratchSizes, Tracker, TrackerConfig, Variant};
+use supine_core::wire::ShapeMode;
 use supine_core::wire::TrackerState;
 use supine_drivers::SourceErrorKind;
 use supine_drivers::clock::MonotonicClock;
@@ -141,6 +142,14 @@ pub struct TrackingEvalArgs {
     /// the tracker's, 10).
     #[arg(long)]
     pub refit_settle_frames: Option<u16>,
+    /// The tracker's shape mode from the first frame, as the arm controller's command sets it: `once` (the
+    /// default), `frozen` (no refits after the init phase) or `continuous` (a round of lock refits every
+    /// `--continuous-refit-frames` good tracked frames after the configured rounds).
+    #[arg(long, value_parser = parse_shape_mode)]
+    pub shape_mode: Option<ShapeMode>,
+    /// The tracker's `continuous_refit_frames` (default: the tracker's, 90).
+    #[arg(long)]
+    pub continuous_refit_frames: Option<u16>,
     /// The tracker's surface adaptation: tracked frames averaged per round (default: the tracker's, 8; 0: off).
     #[arg(long)]
     pub surface_frames: Option<u16>,
@@ -209,6 +218,10 @@ fn parse_weight(s: &str) -> std::result::Result<f32, String> {
         Ok(v) if v.is_finite() && v >= 0.0 => Ok(v),
         _ => Err(format!("`{s}` is not a weight (a finite number, 0 or more)")),
     }
+}
+
+fn parse_shape_mode(s: &str) -> std::result::Result<ShapeMode, String> {
+    ShapeMode::from_name(s).ok_or_else(|| format!("`{s}` is not a shape mode (frozen, once or continuous)"))
 }
 
 /// `s` as a number from 0 to 1, or an error naming `what` it should have been.
@@ -458,6 +471,12 @@ pub fn run_variant(
     }
     if let Some(n) = args.refit_settle_frames {
         cfg.refit_settle_frames = n;
+    }
+    if let Some(m) = args.shape_mode {
+        cfg.shape_mode = m;
+    }
+    if let Some(n) = args.continuous_refit_frames {
+        cfg.continuous_refit_frames = n;
     }
     if let Some(n) = args.refit_late_frames {
         cfg.refit_late_frames = n;

@@ -500,10 +500,7 @@ mod tests {
             if t.probe_scored(f) {
                 scored += 1;
                 let p = t.frames[f as usize].probe_truth.clone().unwrap();
-                let region = (0..=9u8)
-                    .filter_map(BodyRegion::from_u8)
-                    .find(|r| r.name() == p.region)
-                    .unwrap();
+                let region = BodyRegion::from_name(&p.region).unwrap();
                 let e = t
                     .probe_error(p.nearest_camera, p.signed_distance_m, region, f)
                     .unwrap()
