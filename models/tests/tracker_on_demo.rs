@@ -571,26 +571,6 @@ fn bad_frames_lead_to_defined_states() {
     );
 }
 
-/// The states the demo's first 60 frames report and the shape-packet revisions they send, with `cfg`; the
-/// tracker's shape after them.
-fn states_and_revisions(models: &Models<'_>, cfg: TrackerConfig) -> (Vec<TrackerState>, Vec<u8>, [f32; 20]) {
-    let mut states = Vec::new();
-    let mut revisions = Vec::new();
-    let mut shape = None;
-    track_demo(models, cfg, 60, None, |_, tracker, r| {
-        states.push(r.state);
-        for p in r.packets.iter() {
-            if let Body::BodyShape(b) = p.body
-                && revisions.last() != Some(&b.revision)
-            {
-                revisions.push(b.revision);
-            }
-        }
-        shape = tracker.shape().copied();
-    });
-    (states, revisions, shape.expect("init finished"))
-}
-
 #[test]
 fn a_known_shape_is_never_doubted_or_refitted() {
     let bytes = models();
@@ -606,7 +586,7 @@ fn a_known_shape_is_never_doubted_or_refitted() {
         first.is_some_and(|i| states[i..].contains(&TrackerState::Lost))
     };
     // The control: an estimated shape is doubted once its refits are in, and the lock is dropped.
-    let (states, revisions, _) = states_and_revisions(&models, doubting);
+    let (revisions, states, _) = shape_revisions(&models, doubting, 60, None);
     assert!(lost_after_tracking(&states), "{states:?}");
     assert!(revisions.len() > 1, "{revisions:?}");
     // A known shape (a frozen one kept over a re-initialise) plans no lock refits, so it is never doubted: the
@@ -616,27 +596,31 @@ fn a_known_shape_is_never_doubted_or_refitted() {
         .iter_mut()
         .zip(&seq.meta.shape)
         .for_each(|(o, s)| *o = *s + 0.5);
-    let (states, revisions, shape) = states_and_revisions(
-        &models,
-        TrackerConfig {
-            known_shape: Some(known),
-            ..doubting
-        },
-    );
+    let known_cfg = TrackerConfig {
+        known_shape: Some(known),
+        ..doubting
+    };
+    let (revisions, states, shape) = shape_revisions(&models, known_cfg, 60, None);
     assert!(states.contains(&TrackerState::Tracking), "{states:?}");
     assert!(!lost_after_tracking(&states), "{states:?}");
-    assert_eq!(revisions, [1]);
+    assert_eq!(revision_numbers(&revisions), [1]);
     assert_eq!(shape, known);
 }
 
+/// The revision numbers of [`shape_revisions`]' list, without their frames.
+fn revision_numbers(r: &[(usize, u8)]) -> Vec<u8> {
+    r.iter().map(|&(_, v)| v).collect()
+}
+
 /// What a run of `n` demo frames (forth and back) with `cfg` did to the shape: the frame each new body-shape
-/// revision was first sent on, and the states; `switch` sets a shape mode before the given frame.
+/// revision was first sent on, the states, and the shape at the end; `switch` sets a shape mode before the given
+/// frame.
 fn shape_revisions(
     models: &Models<'_>,
     cfg: TrackerConfig,
     n: usize,
     switch: Option<(usize, ShapeMode)>,
-) -> (Vec<(usize, u8)>, Vec<TrackerState>) {
+) -> (Vec<(usize, u8)>, Vec<TrackerState>, [f32; 20]) {
     let frames = frames();
     let k = Intrinsics::KINECT_V1;
     let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
@@ -664,7 +648,7 @@ fn shape_revisions(
             }
         }
     }
-    (revisions, states)
+    (revisions, states, *tracker.shape().expect("init finished"))
 }
 
 #[test]
@@ -672,11 +656,10 @@ fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
     let bytes = models();
     let models = bytes.views().unwrap();
     let seq = SequenceData::load(&demo_dir()).unwrap();
-    let only = |r: &[(usize, u8)]| r.iter().map(|&(_, v)| v).collect::<Vec<_>>();
     // Once (the default): the init phase's shape, then one revision per round of lock refits, then no more.
     let rounds = usize::from(TrackerConfig::default().refit_rounds) + 1;
-    let (once, _) = shape_revisions(&models, config(&seq), 240, None);
-    assert_eq!(only(&once).len(), 1 + rounds, "{once:?}");
+    let (once, ..) = shape_revisions(&models, config(&seq), 240, None);
+    assert_eq!(revision_numbers(&once).len(), 1 + rounds, "{once:?}");
     // Continuous: further rounds, each after at least `continuous_refit_frames` good tracked frames.
     let every = 40;
     let continuous = TrackerConfig {
@@ -684,7 +667,7 @@ fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
         continuous_refit_frames: every,
         ..config(&seq)
     };
-    let (more, states) = shape_revisions(&models, continuous, 240, None);
+    let (more, states, _) = shape_revisions(&models, continuous, 240, None);
     assert_eq!(
         more[..=rounds],
         once[..=rounds],
@@ -699,20 +682,30 @@ fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
         shape_mode: ShapeMode::Frozen,
         ..config(&seq)
     };
-    let (kept, states) = shape_revisions(&models, frozen, 240, None);
-    assert_eq!(only(&kept), [1]);
+    let (kept, states, _) = shape_revisions(&models, frozen, 240, None);
+    assert_eq!(revision_numbers(&kept), [1]);
     assert!(states.contains(&TrackerState::Tracking));
     // Frozen once tracking has begun: a round under way is dropped, not adopted.
     let first_refit = once[1].0;
-    let (dropped, _) = shape_revisions(
+    let (dropped, ..) = shape_revisions(
         &models,
         config(&seq),
         240,
         Some((first_refit - 1, ShapeMode::Frozen)),
     );
-    assert_eq!(only(&dropped), [1]);
+    assert_eq!(revision_numbers(&dropped), [1]);
+    // Frozen just after the first round is in, with every residual over the doubt's bar: the doubt does not judge
+    // (firing, it would put the init phase's shape back and refit it).
+    let doubting = TrackerConfig {
+        doubt_rms_m: 0.0,
+        ..config(&seq)
+    };
+    let switched = once[1].0 + 1;
+    let (after, states, _) = shape_revisions(&models, doubting, 240, Some((switched, ShapeMode::Frozen)));
+    assert_eq!(revision_numbers(&after), [1, 2]);
+    assert!(!states[switched..].contains(&TrackerState::Lost), "{states:?}");
     // Continuous switched on after the configured rounds are over starts a further round.
-    let (on, _) = shape_revisions(
+    let (on, ..) = shape_revisions(
         &models,
         config(&seq),
         240,
