@@ -5,15 +5,14 @@
 
 mod common;
 
-use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use common::{scratch, supine, terminate};
+use common::{ServiceOnPty, serve_on_pty, terminate};
 use supine_core::time::Timestamp;
 use supine_core::wire::stream::SerialDecoder;
 use supine_core::wire::{Body, Command, Message, ShapeMode, TrackerState};
 use supine_drivers::link::Port;
-use supine_drivers::link::serial::{SerialPort, open_pty};
+use supine_drivers::link::serial::SerialPort;
 
 const LIMIT: Duration = Duration::from_secs(300);
 /// Frames tracked in the default mode before the first command: the lock refits' rounds are over by then.
@@ -62,19 +61,11 @@ enum Step {
 #[test]
 fn the_service_follows_the_arms_shape_commands() {
     let started = Instant::now();
-    let dir = scratch("commands");
-    let pty = open_pty().expect("openpty");
-    let mut arm = SerialPort::from_fd(pty.fd, "pty master (the arm)").unwrap();
-    let cfg = config(&dir, &pty.slave_path);
-    let log_path = dir.join("stderr.log");
-    let mut child = supine()
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&log_path).unwrap())
-        .spawn()
-        .unwrap();
+    let ServiceOnPty {
+        mut arm,
+        mut child,
+        log: log_path,
+    } = serve_on_pty("commands", config);
     let mut send_seq = 0u16;
     let mut send = |arm: &mut SerialPort, cmd: Command| {
         let m = Message {

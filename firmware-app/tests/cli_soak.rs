@@ -13,16 +13,14 @@
 mod common;
 
 use std::io::Write;
-use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-use common::{scratch, supine, terminate};
+use common::{ServiceOnPty, serve_on_pty, terminate};
 use supine_core::rng::SplitMix64;
 use supine_core::time::Timestamp;
 use supine_core::wire::stream::SerialDecoder;
 use supine_core::wire::{Body, Kind, Message, TrackerState, sample};
 use supine_drivers::link::Port;
-use supine_drivers::link::serial::{SerialPort, open_pty};
 
 /// Frames the soak runs at least.
 const FRAMES: u64 = 5_000;
@@ -92,19 +90,11 @@ fn pose_state(s: TrackerState) -> bool {
 #[ignore = "soak: about 2 minutes in a debug build; tests/run.sh runs it"]
 fn the_service_survives_a_soak_with_faults() {
     let started = Instant::now();
-    let dir = scratch("soak");
-    let pty = open_pty().expect("openpty");
-    let mut arm = SerialPort::from_fd(pty.fd, "pty master (the arm)").unwrap();
-    let cfg = config(&dir, &pty.slave_path);
-    let log_path = dir.join("stderr.log");
-    let mut child = supine()
-        .args(["run", "--config"])
-        .arg(&cfg)
-        .stdin(Stdio::null())
-        .stdout(Stdio::null())
-        .stderr(std::fs::File::create(&log_path).unwrap())
-        .spawn()
-        .unwrap();
+    let ServiceOnPty {
+        mut arm,
+        mut child,
+        log: log_path,
+    } = serve_on_pty("soak", config);
     let pid = child.id();
 
     let mut decoder: SerialDecoder = SerialDecoder::new();

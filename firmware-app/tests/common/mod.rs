@@ -1,11 +1,14 @@
 //! Helpers for the tests that run the real `supine` binary: a scratch directory per test, the committed demo
-//! recording, and running with a deadline so that a hang fails the test instead of the suite.
+//! recording, running with a deadline so that a hang fails the test instead of the suite, and the service on a pty
+//! with the test as the arm.
 
 #![allow(dead_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
+
+use supine_drivers::link::serial::{SerialPort, open_pty};
 
 /// The binary under test. Under an emulated test run (cross/test: cargo's `CARGO_TARGET_<TRIPLE>_RUNNER`, qemu,
 /// is in the environment) it is started through the same runner, since the kernel cannot execute it directly.
@@ -111,4 +114,33 @@ pub fn terminate(child: &Child) {
         .status()
         .unwrap();
     assert!(st.success());
+}
+
+/// `supine run` on a serial link to a pty, the test holding the pty's master end as the arm controller would.
+pub struct ServiceOnPty {
+    /// The arm's end of the link.
+    pub arm: SerialPort,
+    /// The service.
+    pub child: Child,
+    /// Where its stderr goes.
+    pub log: PathBuf,
+}
+
+/// Start `supine run` in a scratch directory `name` with the config `config(dir, pty slave path)` writes (its path
+/// returned), stdout discarded, stderr to a file.
+pub fn serve_on_pty(name: &str, config: impl FnOnce(&Path, &Path) -> PathBuf) -> ServiceOnPty {
+    let dir = scratch(name);
+    let pty = open_pty().expect("openpty");
+    let arm = SerialPort::from_fd(pty.fd, "pty master (the arm)").unwrap();
+    let cfg = config(&dir, &pty.slave_path);
+    let log = dir.join("stderr.log");
+    let child = supine()
+        .args(["run", "--config"])
+        .arg(&cfg)
+        .stdin(Stdio::null())
+        .stdout(Stdio::null())
+        .stderr(std::fs::File::create(&log).unwrap())
+        .spawn()
+        .unwrap();
+    ServiceOnPty { arm, child, log }
 }
