@@ -217,9 +217,9 @@ pub struct ArmState {
 pub enum Command {
     /// Drop the current track and run the init phase again (bed planes, shape unless frozen).
     Reinitialise,
-    /// Start tracking (after init) and sending tracker messages.
+    /// Resume sending tracker messages.
     Start,
-    /// Stop tracking and sending; keep the estimated shape.
+    /// Pause sending tracker messages; tracking goes on (a start resumes with the current pose and shape).
     Stop,
     /// Set the shape-estimation mode.
     SetShapeMode(ShapeMode),
