@@ -121,7 +121,6 @@ pub fn serve(c: &Checked, mut outputs: Option<&mut FoxgloveOutputs>) -> Result<S
     let mut sending = true;
     let mut ready = false;
     let mut last_state = TrackerState::Initialising;
-    let mut shape_mode = ShapeMode::Once;
     let mut backoff = REOPEN_BACKOFF.0;
     let mut corrupt_run = 0u32;
     let mut capture_offset = 0i64;
@@ -150,7 +149,7 @@ pub fn serve(c: &Checked, mut outputs: Option<&mut FoxgloveOutputs>) -> Result<S
                     match cmd {
                         Command::Reinitialise => {
                             // A frozen shape is kept over the new init phase; otherwise it is estimated again.
-                            let keep = match shape_mode {
+                            let keep = match tracker.config().shape_mode {
                                 ShapeMode::Frozen => tracker.shape().copied(),
                                 _ => None,
                             };
@@ -160,10 +159,7 @@ pub fn serve(c: &Checked, mut outputs: Option<&mut FoxgloveOutputs>) -> Result<S
                         }
                         Command::Start => sending = true,
                         Command::Stop => sending = false,
-                        Command::SetShapeMode(mode) => {
-                            shape_mode = mode;
-                            tracker.set_shape_mode(mode);
-                        }
+                        Command::SetShapeMode(mode) => tracker.set_shape_mode(mode),
                         _ => warn!(?cmd, "command not understood by this build"),
                     }
                 }
