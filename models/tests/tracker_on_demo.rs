@@ -59,6 +59,15 @@ fn frame(depth: &[u16], t: Timestamp, index: u32) -> DepthFrame<'_> {
     DepthFrame::new(depth, 640, 480, t, index).unwrap()
 }
 
+/// The depth of the demo played forth and back (0..59, 58..1, 0..59, ... so the motion stays continuous) at step
+/// `i`, and its capture time at 30 Hz.
+fn forth_and_back(frames: &[(Vec<u16>, Timestamp)], i: usize) -> (&[u16], Timestamp) {
+    let period = 2 * (frames.len() - 1);
+    let j = i % period;
+    let j = if j < frames.len() { j } else { period - j };
+    (&frames[j].0, Timestamp::from_us(1 + i as u64 * 33_333).unwrap())
+}
+
 /// What [`run`] saw.
 struct Run {
     packets: Vec<Message>,
@@ -80,12 +89,8 @@ fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)]
     let mut allocations = 0;
     let mut surface_adapted = None;
     for i in 0..n {
-        // Forth and back: 0..59, 58..1, 0..59, ... so the motion stays continuous.
-        let period = 2 * (frames.len() - 1);
-        let j = i % period;
-        let j = if j < frames.len() { j } else { period - j };
-        let t = Timestamp::from_us(1 + i as u64 * 33_333).unwrap();
-        let f = frame(&frames[j].0, t, i as u32);
+        let (depth, t) = forth_and_back(frames, i);
+        let f = frame(depth, t, i as u32);
         clock.set(t);
         let initialised = tracker.state() != TrackerState::Initialising;
         let (r, a) = count_allocations(|| tracker.process(&f, None, &clock));
@@ -627,18 +632,15 @@ fn shape_revisions(
     let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
     let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let (mut revisions, mut states) = (Vec::new(), Vec::new());
-    let period = 2 * (frames.len() - 1);
     for i in 0..n {
         if let Some((at, mode)) = switch
             && at == i
         {
             tracker.set_shape_mode(mode);
         }
-        let j = i % period;
-        let j = if j < frames.len() { j } else { period - j };
-        let t = Timestamp::from_us(1 + i as u64 * 33_333).unwrap();
+        let (depth, t) = forth_and_back(&frames, i);
         clock.set(t);
-        let r = tracker.process(&frame(&frames[j].0, t, i as u32), None, &clock);
+        let r = tracker.process(&frame(depth, t, i as u32), None, &clock);
         states.push(r.state);
         for p in r.packets.iter() {
             if let Body::BodyShape(b) = p.body
