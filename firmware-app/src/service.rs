@@ -22,7 +22,7 @@ use std::time::{Duration, Instant};
 
 use supine_core::time::Clock;
 use supine_core::tracker::{ArmSample, ScratchSizes, Tracker, TrackerConfig};
-use supine_core::wire::{Body, Command, ShapeMode, TrackerState};
+use supine_core::wire::{Body, Command, TrackerState};
 use supine_drivers::clock::MonotonicClock;
 use supine_drivers::link::{self, Link, LinkCounters, LinkOptions};
 use supine_drivers::source::{self, DepthSource, SourceErrorKind};
@@ -148,12 +148,7 @@ pub fn serve(c: &Checked, mut outputs: Option<&mut FoxgloveOutputs>) -> Result<S
                     info!(?cmd, "command");
                     match cmd {
                         Command::Reinitialise => {
-                            // A frozen shape is kept over the new init phase; otherwise it is estimated again.
-                            let keep = match tracker.config().shape_mode {
-                                ShapeMode::Frozen => tracker.shape().copied(),
-                                _ => None,
-                            };
-                            tracker.set_known_shape(keep);
+                            // In the frozen shape mode the tracker keeps the shape over the new init phase.
                             tracker.reinitialise();
                             init_started = Instant::now();
                         }

@@ -716,3 +716,47 @@ fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
     assert_eq!(on[..=rounds], once[..=rounds]);
     assert!(on.len() > 1 + rounds, "{on:?}");
 }
+
+#[test]
+fn a_reinitialise_keeps_a_frozen_shape_and_estimates_the_shape_again_otherwise() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let k = Intrinsics::KINECT_V1;
+    let cfg = config(&seq);
+    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    let mut i = 0;
+    let mut run = |tracker: &mut Tracker<'_, '_>, n: usize| {
+        let mut states = Vec::new();
+        for _ in 0..n {
+            let (depth, t) = forth_and_back(&frames, i);
+            clock.set(t);
+            states.push(tracker.process(&frame(depth, t, i as u32), None, &clock).state);
+            i += 1;
+        }
+        states
+    };
+    // The init phase's estimate, then the lock refits' first round.
+    run(&mut tracker, 12);
+    let estimated = *tracker.shape().expect("init finished");
+    run(&mut tracker, 60);
+    let refitted = *tracker.shape().unwrap();
+    assert_ne!(refitted, estimated, "a round of lock refits was adopted");
+    // Frozen, re-initialised twice (the second time before the init phase is over): the refitted shape stays.
+    tracker.set_shape_mode(ShapeMode::Frozen);
+    tracker.reinitialise();
+    run(&mut tracker, 1);
+    tracker.reinitialise();
+    let states = run(&mut tracker, 60);
+    assert!(states.contains(&TrackerState::Tracking), "{states:?}");
+    assert_eq!(*tracker.shape().unwrap(), refitted);
+    // Once again: a re-initialise estimates the shape afresh (the first init phase's estimate, on the same frames
+    // of the recording played forth and back, is not needed to match; the frozen shape must be gone).
+    tracker.set_shape_mode(ShapeMode::Once);
+    tracker.reinitialise();
+    run(&mut tracker, 12);
+    assert_ne!(*tracker.shape().expect("init finished"), refitted);
+}

@@ -205,8 +205,8 @@ pub struct TrackerConfig {
     pub refit_settle_frames: u16,
     /// What the tracker does with the shape after the init phase (the wire's shape mode, set by the arm controller's
     /// command): [`ShapeMode::Once`], the default, runs the lock refits' rounds and then keeps the shape;
-    /// [`ShapeMode::Frozen`] keeps the shape it has (no further refits, no doubt; the service also keeps it over a
-    /// re-initialise, as [`TrackerConfig::known_shape`]; the [`surface`] adaptation's rounds still run: they move
+    /// [`ShapeMode::Frozen`] keeps the shape it has (no further refits, no doubt; [`Tracker::reinitialise`] keeps it over
+    /// the new init phase, as [`TrackerConfig::known_shape`]; the [`surface`] adaptation's rounds still run: they move
     /// the model's front, not the shape); [`ShapeMode::Continuous`] goes on with a round of lock refits every
     /// [`TrackerConfig::continuous_refit_frames`] good tracked frames after the configured rounds.
     pub shape_mode: ShapeMode,
@@ -590,6 +590,8 @@ pub struct Tracker<'m, 's> {
     support_ref: Option<f32>,
     /// The lock refit the last frame chose, run when the next frame arrives.
     pending_refit: Option<PendingRefit>,
+    /// The shape a re-initialise in [`ShapeMode::Frozen`] kept: the next init phases use it as a known shape.
+    frozen_shape: Option<[f32; SHAPE_COMPONENTS]>,
     frames: u32,
     seq: u16,
     shape_revision: u8,
@@ -765,6 +767,7 @@ impl<'m, 's> Tracker<'m, 's> {
             switch_candidate: None,
             support_ref: None,
             pending_refit: None,
+            frozen_shape: None,
             frames: 0,
             seq: 0,
             shape_revision: 0,
@@ -844,8 +847,15 @@ impl<'m, 's> Tracker<'m, 's> {
         }
     }
 
-    /// Drop the track and run the init phase again (the re-initialise command).
+    /// Drop the track and run the init phase again (the re-initialise command). In [`ShapeMode::Frozen`] the shape
+    /// is kept (the init phase then only finds the bed, as with [`TrackerConfig::known_shape`]); in the other modes
+    /// it is estimated again.
     pub fn reinitialise(&mut self) {
+        // Re-initialised again before the init phase ended: the shape kept the last time is still the one.
+        self.frozen_shape = match self.cfg.shape_mode {
+            ShapeMode::Frozen => self.shape().copied().or(self.frozen_shape),
+            _ => None,
+        };
         self.machine.reinitialise();
         self.init = Init::new();
         self.torso = None;
@@ -1017,7 +1027,7 @@ impl<'m, 's> Tracker<'m, 's> {
             return;
         };
         let voted = self.init.bed_tries >= wanted;
-        if let Some(z) = self.cfg.known_shape {
+        if let Some(z) = self.cfg.known_shape.or(self.frozen_shape) {
             if voted {
                 self.finish_init(frame, &bed, None, z, clock, watch);
             }
