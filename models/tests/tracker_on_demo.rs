@@ -55,6 +55,22 @@ fn config(seq: &SequenceData) -> TrackerConfig {
     cfg
 }
 
+/// A tracker on the committed models with the demo's configuration, handed to `f` with the demo recording's frames
+/// and a virtual clock.
+fn with_demo_tracker<R>(
+    f: impl FnOnce(&mut Tracker<'_, '_>, &[(Vec<u16>, Timestamp)], &VirtualClock) -> R,
+) -> R {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let k = Intrinsics::KINECT_V1;
+    let cfg = config(&seq);
+    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    f(&mut tracker, &frames(), &clock)
+}
+
 fn frame(depth: &[u16], t: Timestamp, index: u32) -> DepthFrame<'_> {
     DepthFrame::new(depth, 640, 480, t, index).unwrap()
 }
@@ -500,80 +516,74 @@ fn icp_converges_back_from_a_known_perturbation() {
 
 #[test]
 fn bad_frames_lead_to_defined_states() {
-    let bytes = models();
-    let models = bytes.views().unwrap();
-    let seq = SequenceData::load(&demo_dir()).unwrap();
-    let frames = frames();
-    let k = Intrinsics::KINECT_V1;
-    let cfg = config(&seq);
-    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let empty = vec![0u16; 640 * 480];
-    let t0 = Timestamp::from_us(1).unwrap();
-    // An empty frame during init: no bed, still initialising, a health packet says so.
-    let r = tracker.process(&frame(&empty, t0, 0), None, &clock);
-    assert_eq!(r.state, TrackerState::Initialising);
-    assert!(
-        matches!(r.packets.last().unwrap().body, Body::Health(h) if h.state == TrackerState::Initialising)
-    );
-    // A frame of the wrong size is rejected unprocessed.
-    let small = vec![1000u16; 320 * 240];
-    let r = tracker.process(&DepthFrame::new(&small, 320, 240, t0, 1).unwrap(), None, &clock);
-    assert!(r.rejected);
-    assert_eq!(r.state, TrackerState::Initialising);
-    for (i, (d, t)) in frames.iter().enumerate().take(30) {
-        tracker.process(&frame(d, *t, i as u32), None, &clock);
-    }
-    assert!(matches!(
-        tracker.state(),
-        TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
-    ));
-    // The patient leaves the bed: every pixel above the mattress now sees the mattress behind.
-    let bed = *tracker.bed().unwrap();
-    let (d, t) = &frames[30];
-    let mut gone = d.clone();
-    for (i, z) in gone.iter_mut().enumerate() {
-        let (u, v) = ((i % 640) as f32, (i / 640) as f32);
-        let p = k.unproject(u, v, *z as f32 * 0.001);
-        if *z != 0 && bed.mattress.signed_distance(&p) > 0.02 {
-            // The mattress plane along this pixel's ray: signed distance is affine in the depth.
-            let s0 = bed.mattress.signed_distance(&k.unproject(u, v, 0.0));
-            let s1 = bed.mattress.signed_distance(&k.unproject(u, v, 1.0));
-            *z = (-s0 / (s1 - s0) * 1000.0).round() as u16;
-        }
-    }
-    let mut states = Vec::new();
-    for i in 0..10 {
-        states.push(tracker.process(&frame(&gone, *t, 30 + i), None, &clock).state);
-    }
-    assert!(states.contains(&TrackerState::Lost), "{states:?}");
-    assert_eq!(*states.last().unwrap(), TrackerState::Reacquiring);
-    // Empty frames keep it re-acquiring; the patient back, it tracks again.
-    for i in 0..3 {
-        assert_eq!(
-            tracker.process(&frame(&empty, *t, 40 + i), None, &clock).state,
-            TrackerState::Reacquiring
+    with_demo_tracker(|tracker, frames, clock| {
+        let k = Intrinsics::KINECT_V1;
+        let empty = vec![0u16; 640 * 480];
+        let t0 = Timestamp::from_us(1).unwrap();
+        // An empty frame during init: no bed, still initialising, a health packet says so.
+        let r = tracker.process(&frame(&empty, t0, 0), None, clock);
+        assert_eq!(r.state, TrackerState::Initialising);
+        assert!(
+            matches!(r.packets.last().unwrap().body, Body::Health(h) if h.state == TrackerState::Initialising)
         );
-    }
-    let mut back = TrackerState::Reacquiring;
-    for (i, (d, t)) in frames.iter().enumerate().skip(30).take(5) {
-        back = tracker.process(&frame(d, *t, 50 + i as u32), None, &clock).state;
-    }
-    assert!(
-        matches!(back, TrackerState::Tracking | TrackerState::Degraded),
-        "{back:?}"
-    );
-    // A sensor fault, then the re-initialise command.
-    tracker.sensor_fault();
-    assert_eq!(tracker.state(), TrackerState::SensorFault);
-    tracker.reinitialise();
-    assert_eq!(
-        tracker
-            .process(&frame(&frames[0].0, frames[0].1, 99), None, &clock)
-            .state,
-        TrackerState::Initialising
-    );
+        // A frame of the wrong size is rejected unprocessed.
+        let small = vec![1000u16; 320 * 240];
+        let r = tracker.process(&DepthFrame::new(&small, 320, 240, t0, 1).unwrap(), None, clock);
+        assert!(r.rejected);
+        assert_eq!(r.state, TrackerState::Initialising);
+        for (i, (d, t)) in frames.iter().enumerate().take(30) {
+            tracker.process(&frame(d, *t, i as u32), None, clock);
+        }
+        assert!(matches!(
+            tracker.state(),
+            TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
+        ));
+        // The patient leaves the bed: every pixel above the mattress now sees the mattress behind.
+        let bed = *tracker.bed().unwrap();
+        let (d, t) = &frames[30];
+        let mut gone = d.clone();
+        for (i, z) in gone.iter_mut().enumerate() {
+            let (u, v) = ((i % 640) as f32, (i / 640) as f32);
+            let p = k.unproject(u, v, *z as f32 * 0.001);
+            if *z != 0 && bed.mattress.signed_distance(&p) > 0.02 {
+                // The mattress plane along this pixel's ray: signed distance is affine in the depth.
+                let s0 = bed.mattress.signed_distance(&k.unproject(u, v, 0.0));
+                let s1 = bed.mattress.signed_distance(&k.unproject(u, v, 1.0));
+                *z = (-s0 / (s1 - s0) * 1000.0).round() as u16;
+            }
+        }
+        let mut states = Vec::new();
+        for i in 0..10 {
+            states.push(tracker.process(&frame(&gone, *t, 30 + i), None, clock).state);
+        }
+        assert!(states.contains(&TrackerState::Lost), "{states:?}");
+        assert_eq!(*states.last().unwrap(), TrackerState::Reacquiring);
+        // Empty frames keep it re-acquiring; the patient back, it tracks again.
+        for i in 0..3 {
+            assert_eq!(
+                tracker.process(&frame(&empty, *t, 40 + i), None, clock).state,
+                TrackerState::Reacquiring
+            );
+        }
+        let mut back = TrackerState::Reacquiring;
+        for (i, (d, t)) in frames.iter().enumerate().skip(30).take(5) {
+            back = tracker.process(&frame(d, *t, 50 + i as u32), None, clock).state;
+        }
+        assert!(
+            matches!(back, TrackerState::Tracking | TrackerState::Degraded),
+            "{back:?}"
+        );
+        // A sensor fault, then the re-initialise command.
+        tracker.sensor_fault();
+        assert_eq!(tracker.state(), TrackerState::SensorFault);
+        tracker.reinitialise();
+        assert_eq!(
+            tracker
+                .process(&frame(&frames[0].0, frames[0].1, 99), None, clock)
+                .state,
+            TrackerState::Initialising
+        );
+    });
 }
 
 #[test]
@@ -719,44 +729,36 @@ fn shape_modes_keep_the_shape_or_go_on_refitting_it() {
 
 #[test]
 fn a_reinitialise_keeps_a_frozen_shape_and_estimates_the_shape_again_otherwise() {
-    let bytes = models();
-    let models = bytes.views().unwrap();
-    let seq = SequenceData::load(&demo_dir()).unwrap();
-    let frames = frames();
-    let k = Intrinsics::KINECT_V1;
-    let cfg = config(&seq);
-    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let mut i = 0;
-    let mut run = |tracker: &mut Tracker<'_, '_>, n: usize| {
-        let mut states = Vec::new();
-        for _ in 0..n {
-            let (depth, t) = forth_and_back(&frames, i);
-            clock.set(t);
-            states.push(tracker.process(&frame(depth, t, i as u32), None, &clock).state);
-            i += 1;
-        }
-        states
-    };
-    // The init phase's estimate, then the lock refits' first round.
-    run(&mut tracker, 12);
-    let estimated = *tracker.shape().expect("init finished");
-    run(&mut tracker, 60);
-    let refitted = *tracker.shape().unwrap();
-    assert_ne!(refitted, estimated, "a round of lock refits was adopted");
-    // Frozen, re-initialised twice (the second time before the init phase is over): the refitted shape stays.
-    tracker.set_shape_mode(ShapeMode::Frozen);
-    tracker.reinitialise();
-    run(&mut tracker, 1);
-    tracker.reinitialise();
-    let states = run(&mut tracker, 60);
-    assert!(states.contains(&TrackerState::Tracking), "{states:?}");
-    assert_eq!(*tracker.shape().unwrap(), refitted);
-    // Once again: a re-initialise estimates the shape afresh (the first init phase's estimate, on the same frames
-    // of the recording played forth and back, is not needed to match; the frozen shape must be gone).
-    tracker.set_shape_mode(ShapeMode::Once);
-    tracker.reinitialise();
-    run(&mut tracker, 12);
-    assert_ne!(*tracker.shape().expect("init finished"), refitted);
+    with_demo_tracker(|tracker, frames, clock| {
+        let mut i = 0;
+        let mut run = |tracker: &mut Tracker<'_, '_>, n: usize| {
+            let mut states = Vec::new();
+            for _ in 0..n {
+                let (depth, t) = forth_and_back(frames, i);
+                clock.set(t);
+                states.push(tracker.process(&frame(depth, t, i as u32), None, clock).state);
+                i += 1;
+            }
+            states
+        };
+        // The init phase's estimate, then the lock refits' first round.
+        run(tracker, 12);
+        let estimated = *tracker.shape().expect("init finished");
+        run(tracker, 60);
+        let refitted = *tracker.shape().unwrap();
+        assert_ne!(refitted, estimated, "a round of lock refits was adopted");
+        // Frozen, re-initialised twice (the second time before the init phase is over): the refitted shape stays.
+        tracker.set_shape_mode(ShapeMode::Frozen);
+        tracker.reinitialise();
+        run(tracker, 1);
+        tracker.reinitialise();
+        let states = run(tracker, 60);
+        assert!(states.contains(&TrackerState::Tracking), "{states:?}");
+        assert_eq!(*tracker.shape().unwrap(), refitted);
+        // Once again: a re-initialise estimates the shape afresh, and the frozen one is gone.
+        tracker.set_shape_mode(ShapeMode::Once);
+        tracker.reinitialise();
+        run(tracker, 12);
+        assert_ne!(*tracker.shape().expect("init finished"), refitted);
+    });
 }
