@@ -205,10 +205,10 @@ pub struct TrackerConfig {
     pub refit_settle_frames: u16,
     /// What the tracker does with the shape after the init phase (the wire's shape mode, set by the arm controller's
     /// command): [`ShapeMode::Once`], the default, runs the lock refits' rounds and then keeps the shape;
-    /// [`ShapeMode::Frozen`] keeps the shape it has (no further refits, no doubt; [`Tracker::reinitialise`] keeps it over
-    /// the new init phase, as [`TrackerConfig::known_shape`]; the [`surface`] adaptation's rounds still run: they move
-    /// the model's front, not the shape); [`ShapeMode::Continuous`] goes on with a round of lock refits every
-    /// [`TrackerConfig::continuous_refit_frames`] good tracked frames after the configured rounds.
+    /// [`ShapeMode::Frozen`] keeps the shape it has (no further refits, no doubt; [`Tracker::reinitialise`] keeps
+    /// it over the new init phase, as [`TrackerConfig::known_shape`]; the [`surface`] adaptation's rounds still
+    /// run: they move the model's front, not the shape); [`ShapeMode::Continuous`] goes on with a round of lock
+    /// refits every [`TrackerConfig::continuous_refit_frames`] good tracked frames after the configured rounds.
     pub shape_mode: ShapeMode,
     /// In [`ShapeMode::Continuous`], the consecutive good tracked frames with the current shape a further round of
     /// lock refits waits for: 90 (3 s at 30 Hz), so a revision is sent at most every few seconds.
