@@ -36,13 +36,6 @@ fn config(dir: &std::path::Path, link: &std::path::Path) -> std::path::PathBuf {
     path
 }
 
-fn pose_state(s: TrackerState) -> bool {
-    matches!(
-        s,
-        TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
-    )
-}
-
 /// What the arm does next.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 enum Step {
@@ -102,7 +95,7 @@ fn the_service_follows_the_arms_shape_commands() {
         let last_shape = shapes.last().map(|&(_, r, c)| (r, c));
         match step {
             Step::Settling => {
-                let tracked = states.iter().position(|&s| pose_state(s));
+                let tracked = states.iter().position(|&s| s.has_pose());
                 if tracked.is_some_and(|t| frames >= t as u64 + SETTLE_FRAMES) {
                     once_revisions = last_shape.expect("no body shape sent").0;
                     send(&mut arm, Command::SetShapeMode(ShapeMode::Continuous));
@@ -128,7 +121,7 @@ fn the_service_follows_the_arms_shape_commands() {
             Step::Reinitialised(at) => {
                 let after = &states[at as usize..];
                 let init = after.iter().position(|&s| s == TrackerState::Initialising);
-                if init.is_some_and(|i| after[i..].iter().filter(|&&s| pose_state(s)).count() >= 60) {
+                if init.is_some_and(|i| after[i..].iter().filter(|&&s| s.has_pose()).count() >= 60) {
                     terminate(&child);
                     step = Step::Done;
                 }

@@ -79,13 +79,6 @@ fn figure(line: &str, unit: &str) -> u64 {
     words[at].parse().unwrap()
 }
 
-fn pose_state(s: TrackerState) -> bool {
-    matches!(
-        s,
-        TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
-    )
-}
-
 #[test]
 #[ignore = "soak: about 2 minutes in a debug build; tests/run.sh runs it"]
 fn the_service_survives_a_soak_with_faults() {
@@ -228,21 +221,21 @@ fn the_service_survives_a_soak_with_faults() {
         })
         .collect();
     assert_eq!(states.first(), Some(&TrackerState::Initialising));
-    let first_pose = states.iter().position(|&s| pose_state(s)).expect("never tracked");
+    let first_pose = states.iter().position(|&s| s.has_pose()).expect("never tracked");
     let fault_at = states
         .iter()
         .position(|&s| s == TrackerState::SensorFault)
         .expect("no sensor_fault state after the unplug");
     assert!(fault_at > first_pose);
     assert!(
-        states[fault_at..].iter().any(|&s| pose_state(s)),
+        states[fault_at..].iter().any(|&s| s.has_pose()),
         "never tracked again after the unplug"
     );
     // Every run of frames without a pose after init, not counting the fault packets themselves.
     let mut longest = 0;
     let mut run = 0;
     for &s in &states[first_pose..] {
-        if pose_state(s) {
+        if s.has_pose() {
             longest = longest.max(run);
             run = 0;
         } else if s != TrackerState::SensorFault {

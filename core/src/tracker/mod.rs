@@ -1472,10 +1472,7 @@ impl<'m, 's> Tracker<'m, 's> {
         };
         let variant = self.cfg.variant;
         let mut priors = [None; P];
-        let prior_pose = match self.machine.state() {
-            TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded => self.pose,
-            _ => None,
-        };
+        let prior_pose = self.pose.filter(|_| self.machine.has_pose());
         if variant == Variant::ForestIcpFeedback
             && let Some(pose) = prior_pose
         {

@@ -82,10 +82,7 @@ impl StateMachine {
 
     /// Whether poses are sent in the current state.
     pub fn has_pose(&self) -> bool {
-        matches!(
-            self.state,
-            TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
-        )
+        self.state.has_pose()
     }
 
     /// Whether the init phase has completed since the last re-initialise.

@@ -255,6 +255,16 @@ wire_enum! {
     }
 }
 
+impl TrackerState {
+    /// Whether the tracker has a pose in this state (and sends it): tracking, occluded or degraded.
+    pub fn has_pose(self) -> bool {
+        matches!(
+            self,
+            TrackerState::Tracking | TrackerState::Degraded | TrackerState::Occluded
+        )
+    }
+}
+
 wire_enum! {
     /// The body region under a probe report's nearest surface point.
     BodyRegion {
