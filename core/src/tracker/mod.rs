@@ -821,11 +821,6 @@ impl<'m, 's> Tracker<'m, 's> {
         )
     }
 
-    /// Use `shape` (σ units) instead of estimating one at the next init phase (`None`: estimate it).
-    pub fn set_known_shape(&mut self, shape: Option<[f32; SHAPE_COMPONENTS]>) {
-        self.cfg.known_shape = shape;
-    }
-
     /// Switch the shape mode ([`TrackerConfig::shape_mode`]) from the next frame on. Frozen drops the lock refits
     /// still to run (a round half summed is not adopted); continuous starts a round when none is under way once the
     /// init phase is done (the first at once when none has run, a later one after
