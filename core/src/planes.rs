@@ -18,16 +18,17 @@
 //! never the mattress (the mattress then goes a nominal thickness above it), and a level-looking plane more than
 //! 2.5° off that base is not the mattress either. A section's bottom leaves out the strip of the floor its plane
 //! crosses (5 cm each side: a far floor comes in depth layers) and, when no floor was found, its points below an
-//! empty 0.3 m of height. Up is the caller's (from `robot_base_from_camera`) or the floor's normal; without either,
-//! the largest plane is taken as horizontal, which a steeply raised head section in a close view can defeat.
+//! empty 0.3 m of height, and a few strays (at most 3 % of its points) below an empty 2 cm. Up is the caller's (from
+//! `robot_base_from_camera`) or the floor's normal; without either, the largest plane is taken as horizontal, which a
+//! steeply raised head section in a close view can defeat.
 //!
 //! Cost: [`estimate_bed`] back-projects every `stride`-th pixel of each `stride`-th row (8 k points at the default
 //! stride of 6) and runs `iterations` hypotheses per plane over them (about 5 M multiply-adds, a few ms, once). Telling
 //! floor from mattress counts what lies on each candidate pair (up to ~70 passes over the points, under a million
 //! comparisons). The head-section tests add a few passes over the points and up to 256 local normals (four depth reads
 //! each) per tilted plane; with a raised section, its bottom takes the local normal of each of the section's points
-//! at every height query (about 0.5 ms more, 3.6 -> 4.1 ms median on the choice sets' 78 raised first frames). The clip is one rigid transform and six comparisons per point. Nothing allocates: the caller
-//! lends the scratch.
+//! at every height query (about 0.5 ms more, 3.6 -> 4.1 ms median on the choice sets' 78 raised first frames). The
+//! clip is one rigid transform and six comparisons per point. Nothing allocates: the caller lends the scratch.
 
 use crate::camera::Intrinsics;
 use crate::depth::DepthFrame;
@@ -654,6 +655,15 @@ const SECTION_BOTTOM_SHARE: f32 = 0.01;
 const SECTION_GAP_M: f32 = 0.3;
 /// ... and only while they are at most this share of its points.
 const SECTION_STRIP_MAX_SHARE: f32 = 0.2;
+/// A few of a section's inliers below an empty stretch this high are strays, not its bottom, metres: where another
+/// surface crosses the section's plane below the hinge (the bed's frame, an arm link, at the image's edge where no
+/// local normal tells them apart), a short line of its points lies in the inlier band. They put s51036's mattress
+/// 144-179 mm low on all of its first five frames and s54072's 103-111 mm low on two (the vote then kept that bed):
+/// the tracker never acquired either. A section's own points run up from the hinge in 1 cm steps without a gap.
+const SECTION_STRAY_GAP_M: f32 = 0.02;
+/// ... and only while they are at most this share of its points (s51036: 6 strays of 1211 over a floor strip of 26;
+/// 3 % chosen on 2000 one-frame scenes, where 10 % let one mattress sink 141 mm).
+const SECTION_STRAY_MAX_SHARE: f32 = 0.03;
 
 impl SectionBottom<'_> {
     /// The height above `plane` under which [`SECTION_BOTTOM_SHARE`] of the section's points lie, metres.
@@ -674,7 +684,14 @@ impl SectionBottom<'_> {
             section_points(points, labels, self.label, self.found, &floor)
                 .map(|p| on_section(p).then(|| plane.signed_distance(p)))
         };
-        low_quantile(own, SECTION_BOTTOM_SHARE, SECTION_GAP_M, SECTION_STRIP_MAX_SHARE)
+        low_quantile(
+            own,
+            SECTION_BOTTOM_SHARE,
+            &[
+                (SECTION_GAP_M, SECTION_STRIP_MAX_SHARE),
+                (SECTION_STRAY_GAP_M, SECTION_STRAY_MAX_SHARE),
+            ],
+        )
     }
 
     /// The level plane (normal `up`) through the section's bottom.
@@ -755,15 +772,15 @@ const LEVEL_STRIP_M: f32 = 0.015;
 const FLOOR_STRIP_M: f32 = 0.05;
 
 /// The value under which `share` of the values `own` yields lie (1 cm bins over their range; 0 when none), but
-/// above the lowest values when an empty stretch at least `gap` long separates them from the rest and they are at
-/// most `max_dropped` of all. Those still count toward `share`: [`SECTION_BOTTOM_SHARE`] was set with them in, and
-/// counting only the rest put s4004's mattress 16 mm high (few points show near its hinge). A `None` is a value that
-/// counts toward `share` but can never be the answer (it lies above all the others).
+/// above the lowest values when, for one of the `(gap, max_dropped)` pairs of `drops`, an empty stretch at least
+/// `gap` long separates them from the rest and they are at most `max_dropped` of all. Those still count toward
+/// `share`: [`SECTION_BOTTOM_SHARE`] was set with them in, and counting only the rest put s4004's mattress 16 mm high
+/// (few points show near its hinge). A `None` is a value that counts toward `share` but can never be the answer (it
+/// lies above all the others).
 fn low_quantile<I: Iterator<Item = Option<f32>>>(
     own: impl Fn() -> I,
     share: f32,
-    gap: f32,
-    max_dropped: f32,
+    drops: &[(f32, f32)],
 ) -> f32 {
     const BINS: usize = 256;
     let (lo, hi, n) = own().fold(
@@ -787,7 +804,10 @@ fn low_quantile<I: Iterator<Item = Option<f32>>>(
             empty += bin;
             continue;
         }
-        if empty >= gap && below as f32 <= max_dropped * n as f32 {
+        if drops
+            .iter()
+            .any(|&(gap, max_dropped)| empty >= gap && below as f32 <= max_dropped * n as f32)
+        {
             dropped = below;
         }
         empty = 0.0;
@@ -1674,6 +1694,33 @@ mod tests {
         let section = bed.head_section.expect("the raised section is found");
         let deg = libm::acosf(section.normal().dot(&bed.mattress.normal()).min(1.0)).to_degrees();
         assert!((deg - 16.0).abs() < 2.0, "section at {deg}°");
+    }
+
+    #[test]
+    fn a_few_strays_below_a_gap_are_not_the_sections_bottom() {
+        // s51036's first frame, in shape: 1200 section points rising evenly from the hinge (0 to 0.6 m), six strays
+        // 0.10-0.18 m below it (a surface crossing the plane under the hinge) and a floor strip 0.7 m below.
+        let section = (0..1200).map(|i| i as f32 * 0.0005);
+        let strays = [-0.177, -0.177, -0.135, -0.115, -0.102, -0.102];
+        let floor = (0..26).map(|i| -0.75 + i as f32 * 0.002);
+        let values: vec::Vec<f32> = section.chain(strays).chain(floor).collect();
+        let own = || values.iter().map(|&v| Some(v));
+        let drops = [
+            (SECTION_GAP_M, SECTION_STRIP_MAX_SHARE),
+            (SECTION_STRAY_GAP_M, SECTION_STRAY_MAX_SHARE),
+        ];
+        let bottom = low_quantile(own, SECTION_BOTTOM_SHARE, &drops);
+        assert!(bottom.abs() < 0.01, "bottom {bottom}");
+        // With the floor's rule alone the lowest stray was the bottom.
+        let floor_only = low_quantile(own, SECTION_BOTTOM_SHARE, &drops[..1]);
+        assert!((floor_only + 0.177).abs() < 0.01, "floor rule alone {floor_only}");
+        // Strays more than SECTION_STRAY_MAX_SHARE of the points are the section's own: nothing is dropped.
+        let many: vec::Vec<f32> = (0..1200)
+            .map(|i| i as f32 * 0.0005)
+            .chain((0..60).map(|i| -0.12 + i as f32 * 0.0002))
+            .collect();
+        let bottom = low_quantile(|| many.iter().map(|&v| Some(v)), SECTION_BOTTOM_SHARE, &drops);
+        assert!(bottom < -0.1, "bottom {bottom}");
     }
 
     #[test]
