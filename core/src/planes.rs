@@ -664,6 +664,11 @@ const SECTION_STRAY_GAP_M: f32 = 0.02;
 /// ... and only while they are at most this share of its points (s51036: 6 strays of 1211 over a floor strip of 26;
 /// 3 % chosen on 2000 one-frame scenes, where 10 % let one mattress sink 141 mm).
 const SECTION_STRAY_MAX_SHARE: f32 = 0.03;
+/// The (gap, share) rules of what [`low_quantile`] drops below a section's bottom: the floor's strip, then strays.
+const SECTION_DROPS: [(f32, f32); 2] = [
+    (SECTION_GAP_M, SECTION_STRIP_MAX_SHARE),
+    (SECTION_STRAY_GAP_M, SECTION_STRAY_MAX_SHARE),
+];
 
 impl SectionBottom<'_> {
     /// The height above `plane` under which [`SECTION_BOTTOM_SHARE`] of the section's points lie, metres.
@@ -684,14 +689,7 @@ impl SectionBottom<'_> {
             section_points(points, labels, self.label, self.found, &floor)
                 .map(|p| on_section(p).then(|| plane.signed_distance(p)))
         };
-        low_quantile(
-            own,
-            SECTION_BOTTOM_SHARE,
-            &[
-                (SECTION_GAP_M, SECTION_STRIP_MAX_SHARE),
-                (SECTION_STRAY_GAP_M, SECTION_STRAY_MAX_SHARE),
-            ],
-        )
+        low_quantile(own, SECTION_BOTTOM_SHARE, &SECTION_DROPS)
     }
 
     /// The level plane (normal `up`) through the section's bottom.
@@ -1705,10 +1703,7 @@ mod tests {
         let floor = (0..26).map(|i| -0.75 + i as f32 * 0.002);
         let values: vec::Vec<f32> = section.chain(strays).chain(floor).collect();
         let own = || values.iter().map(|&v| Some(v));
-        let drops = [
-            (SECTION_GAP_M, SECTION_STRIP_MAX_SHARE),
-            (SECTION_STRAY_GAP_M, SECTION_STRAY_MAX_SHARE),
-        ];
+        let drops = SECTION_DROPS;
         let bottom = low_quantile(own, SECTION_BOTTOM_SHARE, &drops);
         assert!(bottom.abs() < 0.01, "bottom {bottom}");
         // With the floor's rule alone the lowest stray was the bottom.
