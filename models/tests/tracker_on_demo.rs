@@ -55,6 +55,19 @@ fn config(seq: &SequenceData) -> TrackerConfig {
     cfg
 }
 
+/// A tracker on `models` with `cfg` (the Kinect's intrinsics), handed to `f` with a virtual clock at 1 µs.
+fn with_tracker<R>(
+    models: &Models<'_>,
+    cfg: TrackerConfig,
+    f: impl FnOnce(&mut Tracker<'_, '_>, &VirtualClock) -> R,
+) -> R {
+    let k = Intrinsics::KINECT_V1;
+    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
+    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
+    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
+    f(&mut tracker, &clock)
+}
+
 /// A tracker on the committed models with the demo's configuration, handed to `f` with the demo recording's frames
 /// and a virtual clock.
 fn with_demo_tracker<R>(
@@ -63,12 +76,8 @@ fn with_demo_tracker<R>(
     let bytes = models();
     let models = bytes.views().unwrap();
     let seq = SequenceData::load(&demo_dir()).unwrap();
-    let k = Intrinsics::KINECT_V1;
-    let cfg = config(&seq);
-    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    f(&mut tracker, &frames(), &clock)
+    let frames = frames();
+    with_tracker(&models, config(&seq), |tracker, clock| f(tracker, &frames, clock))
 }
 
 fn frame(depth: &[u16], t: Timestamp, index: u32) -> DepthFrame<'_> {
@@ -96,35 +105,33 @@ struct Run {
 
 /// Run `n` frames (the demo played forth and back).
 fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)], n: usize) -> Run {
-    let k = Intrinsics::KINECT_V1;
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let mut packets = Vec::with_capacity(n * 5);
-    let mut states = Vec::with_capacity(n);
-    let mut allocations = 0;
-    let mut surface_adapted = None;
-    for i in 0..n {
-        let (depth, t) = forth_and_back(frames, i);
-        let f = frame(depth, t, i as u32);
-        clock.set(t);
-        let initialised = tracker.state() != TrackerState::Initialising;
-        let (r, a) = count_allocations(|| tracker.process(&f, None, &clock));
-        if initialised {
-            allocations += a;
+    with_tracker(models, cfg, |tracker, clock| {
+        let mut packets = Vec::with_capacity(n * 5);
+        let mut states = Vec::with_capacity(n);
+        let mut allocations = 0;
+        let mut surface_adapted = None;
+        for i in 0..n {
+            let (depth, t) = forth_and_back(frames, i);
+            let f = frame(depth, t, i as u32);
+            clock.set(t);
+            let initialised = tracker.state() != TrackerState::Initialising;
+            let (r, a) = count_allocations(|| tracker.process(&f, None, clock));
+            if initialised {
+                allocations += a;
+            }
+            states.push(r.state);
+            packets.extend(r.packets.iter().copied());
+            if surface_adapted.is_none() && tracker.surface_rounds() > 0 {
+                surface_adapted = Some(i);
+            }
         }
-        states.push(r.state);
-        packets.extend(r.packets.iter().copied());
-        if surface_adapted.is_none() && tracker.surface_rounds() > 0 {
-            surface_adapted = Some(i);
+        Run {
+            packets,
+            states,
+            allocations,
+            surface_adapted,
         }
-    }
-    Run {
-        packets,
-        states,
-        allocations,
-        surface_adapted,
-    }
+    })
 }
 
 #[test]
@@ -227,23 +234,21 @@ fn init_with_first_frame_shifted(
     frames: &[(Vec<u16>, Timestamp)],
     shift_mm: u16,
 ) -> (usize, supine_core::planes::BedScene) {
-    let k = Intrinsics::KINECT_V1;
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    for (i, (depth, t)) in frames.iter().enumerate() {
-        let shifted: Vec<u16> = depth
-            .iter()
-            .map(|&d| if d == 0 { 0 } else { d + shift_mm })
-            .collect();
-        let depth = if i == 0 { &shifted } else { depth };
-        clock.set(*t);
-        tracker.process(&frame(depth, *t, i as u32), None, &clock);
-        if tracker.state() != TrackerState::Initialising {
-            return (i, *tracker.bed().expect("a bed once initialised"));
+    with_tracker(models, cfg, |tracker, clock| {
+        for (i, (depth, t)) in frames.iter().enumerate() {
+            let shifted: Vec<u16> = depth
+                .iter()
+                .map(|&d| if d == 0 { 0 } else { d + shift_mm })
+                .collect();
+            let depth = if i == 0 { &shifted } else { depth };
+            clock.set(*t);
+            tracker.process(&frame(depth, *t, i as u32), None, clock);
+            if tracker.state() != TrackerState::Initialising {
+                return (i, *tracker.bed().expect("a bed once initialised"));
+            }
         }
-    }
-    panic!("the init phase did not end");
+        panic!("the init phase did not end");
+    })
 }
 
 #[test]
@@ -335,17 +340,15 @@ fn track_demo(
     mut each: impl FnMut(usize, &Tracker<'_, '_>, &FrameReport),
 ) {
     let frames = frames();
-    let k = Intrinsics::KINECT_V1;
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
     let empty = vec![0u16; 640 * 480];
-    for (i, (d, t)) in frames.iter().enumerate().take(n) {
-        clock.set(*t);
-        let d = if blank == Some(i) { &empty } else { d };
-        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
-        each(i, &tracker, &r);
-    }
+    with_tracker(models, cfg, |tracker, clock| {
+        for (i, (d, t)) in frames.iter().enumerate().take(n) {
+            clock.set(*t);
+            let d = if blank == Some(i) { &empty } else { d };
+            let r = tracker.process(&frame(d, *t, i as u32), None, clock);
+            each(i, tracker, &r);
+        }
+    })
 }
 
 #[test]
@@ -435,67 +438,66 @@ fn icp_converges_back_from_a_known_perturbation() {
         }),
         ..config(&seq)
     };
-    let mut store = TrackerScratch::new(&ScratchSizes::of(&models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let mut converged: Option<Isometry3> = None;
-    for (i, (d, t)) in frames.iter().enumerate().take(20) {
-        let r = tracker.process(&frame(d, *t, i as u32), None, &clock);
-        converged = r.camera_from_torso.or(converged);
-    }
-    let converged = converged.expect("the tracker found the torso");
-    // The converged pose lies near the truth of the frame it came from.
-    let truth = isometry_of(&seq.truth[19].camera_from_torso);
-    assert!((converged.translation.vector - truth.translation.vector).norm() < 0.05);
-    let (d, t) = &frames[19];
-    let f = frame(d, *t, 19);
-    let surface = tracker.surface().unwrap();
-    let bed = tracker.bed().unwrap();
-    let icp = TorsoIcpConfig::default();
-    let params = torso_icp::icp_params(&icp, bed);
-    let budget = tracker.config().budget;
-    let (again, _) = torso_icp::fit_torso(
-        &f,
-        &k,
-        surface.vertices(),
-        surface.normals(),
-        converged,
-        &icp,
-        &params,
-        &budget,
-        0,
-        &clock,
-        &Stopwatch::start(&clock),
-    );
-    for (dt, angle) in [
-        (Vector3::new(0.03, 0.0, 0.0), 0.0),
-        (Vector3::new(0.0, 0.02, -0.02), 0.05),
-        (Vector3::zeros(), -0.08),
-    ] {
-        // Shifted in the camera frame, turned about the torso's own long axis.
-        let start = Isometry3::from_parts(Translation3::from(dt), UnitQuaternion::identity())
-            * again
-            * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle);
-        let (back, fit) = torso_icp::fit_torso(
+    with_tracker(&models, cfg, |tracker, clock| {
+        let mut converged: Option<Isometry3> = None;
+        for (i, (d, t)) in frames.iter().enumerate().take(20) {
+            let r = tracker.process(&frame(d, *t, i as u32), None, clock);
+            converged = r.camera_from_torso.or(converged);
+        }
+        let converged = converged.expect("the tracker found the torso");
+        // The converged pose lies near the truth of the frame it came from.
+        let truth = isometry_of(&seq.truth[19].camera_from_torso);
+        assert!((converged.translation.vector - truth.translation.vector).norm() < 0.05);
+        let (d, t) = &frames[19];
+        let f = frame(d, *t, 19);
+        let surface = tracker.surface().unwrap();
+        let bed = tracker.bed().unwrap();
+        let icp = TorsoIcpConfig::default();
+        let params = torso_icp::icp_params(&icp, bed);
+        let budget = tracker.config().budget;
+        let (again, _) = torso_icp::fit_torso(
             &f,
             &k,
             surface.vertices(),
             surface.normals(),
-            start,
+            converged,
             &icp,
             &params,
             &budget,
             0,
-            &clock,
-            &Stopwatch::start(&clock),
+            clock,
+            &Stopwatch::start(clock),
         );
-        let dp = (back.translation.vector - again.translation.vector).norm();
-        let da = back.rotation.angle_to(&again.rotation);
-        assert!(
-            dp < 0.005 && da < 0.02,
-            "from {dt:?} / {angle} rad: {dp} m, {da} rad off ({fit:?})"
-        );
-    }
+        for (dt, angle) in [
+            (Vector3::new(0.03, 0.0, 0.0), 0.0),
+            (Vector3::new(0.0, 0.02, -0.02), 0.05),
+            (Vector3::zeros(), -0.08),
+        ] {
+            // Shifted in the camera frame, turned about the torso's own long axis.
+            let start = Isometry3::from_parts(Translation3::from(dt), UnitQuaternion::identity())
+                * again
+                * UnitQuaternion::from_axis_angle(&Vector3::y_axis(), angle);
+            let (back, fit) = torso_icp::fit_torso(
+                &f,
+                &k,
+                surface.vertices(),
+                surface.normals(),
+                start,
+                &icp,
+                &params,
+                &budget,
+                0,
+                clock,
+                &Stopwatch::start(clock),
+            );
+            let dp = (back.translation.vector - again.translation.vector).norm();
+            let da = back.rotation.angle_to(&again.rotation);
+            assert!(
+                dp < 0.005 && da < 0.02,
+                "from {dt:?} / {angle} rad: {dp} m, {da} rad off ({fit:?})"
+            );
+        }
+    })
 }
 
 #[test]
@@ -618,30 +620,28 @@ fn shape_revisions(
     switch: Option<(usize, ShapeMode)>,
 ) -> (Vec<(usize, u8)>, Vec<TrackerState>, [f32; 20]) {
     let frames = frames();
-    let k = Intrinsics::KINECT_V1;
-    let mut store = TrackerScratch::new(&ScratchSizes::of(models, &k, &cfg.planes));
-    let mut tracker = Tracker::new(*models, k, cfg, store.scratch()).unwrap();
-    let clock = VirtualClock::new(Timestamp::from_us(1).unwrap());
-    let (mut revisions, mut states) = (Vec::new(), Vec::new());
-    for i in 0..n {
-        if let Some((at, mode)) = switch
-            && at == i
-        {
-            tracker.set_shape_mode(mode);
-        }
-        let (depth, t) = forth_and_back(&frames, i);
-        clock.set(t);
-        let r = tracker.process(&frame(depth, t, i as u32), None, &clock);
-        states.push(r.state);
-        for p in r.packets.iter() {
-            if let Body::BodyShape(b) = p.body
-                && revisions.last().map(|&(_, v)| v) != Some(b.revision)
+    with_tracker(models, cfg, |tracker, clock| {
+        let (mut revisions, mut states) = (Vec::new(), Vec::new());
+        for i in 0..n {
+            if let Some((at, mode)) = switch
+                && at == i
             {
-                revisions.push((i, b.revision));
+                tracker.set_shape_mode(mode);
+            }
+            let (depth, t) = forth_and_back(&frames, i);
+            clock.set(t);
+            let r = tracker.process(&frame(depth, t, i as u32), None, clock);
+            states.push(r.state);
+            for p in r.packets.iter() {
+                if let Body::BodyShape(b) = p.body
+                    && revisions.last().map(|&(_, v)| v) != Some(b.revision)
+                {
+                    revisions.push((i, b.revision));
+                }
             }
         }
-    }
-    (revisions, states, *tracker.shape().expect("init finished"))
+        (revisions, states, *tracker.shape().expect("init finished"))
+    })
 }
 
 #[test]
