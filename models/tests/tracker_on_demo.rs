@@ -97,6 +97,10 @@ fn forth_and_back(frames: &[(Vec<u16>, Timestamp)], i: usize) -> (&[u16], Timest
 struct Run {
     packets: Vec<Message>,
     states: Vec<TrackerState>,
+    /// Each frame's tracked pose.
+    poses: Vec<Option<Isometry3>>,
+    /// Frames after the init phase on which the forest ran (it gave points).
+    forest_frames: usize,
     /// Allocations made by `process` after the init phase.
     allocations: u64,
     /// The frame whose processing applied the first surface adaptation round.
@@ -108,6 +112,8 @@ fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)]
     with_tracker(models, cfg, |tracker, clock| {
         let mut packets = Vec::with_capacity(n * 5);
         let mut states = Vec::with_capacity(n);
+        let mut poses = Vec::with_capacity(n);
+        let mut forest_frames = 0;
         let mut allocations = 0;
         let mut surface_adapted = None;
         for i in 0..n {
@@ -118,8 +124,10 @@ fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)]
             let (r, a) = count_allocations(|| tracker.process(&f, None, clock));
             if initialised {
                 allocations += a;
+                forest_frames += usize::from(r.forest_points.iter().any(Option::is_some));
             }
             states.push(r.state);
+            poses.push(r.camera_from_torso);
             packets.extend(r.packets.iter().copied());
             if surface_adapted.is_none() && tracker.surface_rounds() > 0 {
                 surface_adapted = Some(i);
@@ -128,6 +136,8 @@ fn run(models: &Models<'_>, cfg: TrackerConfig, frames: &[(Vec<u16>, Timestamp)]
         Run {
             packets,
             states,
+            poses,
+            forest_frames,
             allocations,
             surface_adapted,
         }
@@ -147,6 +157,7 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
         states,
         allocations,
         surface_adapted,
+        ..
     } = run(&models, cfg, &frames, 1000);
     assert_eq!(allocations, 0, "the tracker allocated after init");
     // The surface adaptation ran inside the allocation count and early enough for the replays below to cover it.
@@ -178,6 +189,45 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
         let p = pool.install(|| run(&models, cfg, &frames, 120)).packets;
         assert_eq!(&packets[..p.len()], &p[..], "{threads} threads");
     }
+}
+
+#[test]
+fn the_forest_runs_only_where_its_start_is_needed_and_the_poses_are_those_of_running_it_every_frame() {
+    let bytes = models();
+    let models = bytes.views().unwrap();
+    let seq = SequenceData::load(&demo_dir()).unwrap();
+    let frames = frames();
+    let lazy = config(&seq);
+    assert!(!lazy.forest_every_frame, "the default");
+    let every = TrackerConfig {
+        forest_every_frame: true,
+        ..lazy
+    };
+    let (a, b) = (
+        run(&models, lazy, &frames, 300),
+        run(&models, every, &frames, 300),
+    );
+    assert_eq!(a.states, b.states);
+    assert_eq!(a.poses, b.poses);
+    assert_eq!(a.packets, b.packets);
+    let init = a
+        .states
+        .iter()
+        .position(|s| *s != TrackerState::Initialising)
+        .unwrap();
+    let tracked = a.states[init..].iter().filter(|s| s.has_pose()).count();
+    assert!(tracked > 200, "tracked {tracked} frames");
+    let after_init = a.states.len() - init;
+    assert!(
+        b.forest_frames * 20 >= after_init * 19,
+        "every-frame forest on {} of {after_init}",
+        b.forest_frames
+    );
+    assert!(
+        a.forest_frames * 4 < after_init,
+        "the forest ran on {} of {after_init} frames",
+        a.forest_frames
+    );
 }
 
 /// The first frame after the init phase that has a tracked pose, and the init phase's last frame.

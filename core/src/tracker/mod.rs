@@ -11,7 +11,10 @@
 //! ([`torso_icp`]: robust, occluder-aware, with what lies low over the bed taken as the patient rather than the arm,
 //! a fixed iteration count cut by the [`budget`]); the refined pose and points feed the next frame's prior; probe
 //! mapping ([`crate::probe`]) maps the newest arm state onto the surface; the [`state`] machine decides what the
-//! health message says; packets are stamped with the frame's capture time.
+//! health message says; packets are stamped with the frame's capture time. With a pose to fit from, the fit from that
+//! pose (the temporal start) runs first and the forest only when its start is needed (the temporal fit neither good
+//! nor followed while occluded): the forest's points would go unused on the other frames, so the poses are those of
+//! running it every frame ([`TrackerConfig::forest_every_frame`]) without its millisecond on most tracked frames.
 //!
 //! A fit is good when its residual is small, most pairs lie within the shape's mismatch and the camera does not
 //! see through the model ([`torso_icp::TorsoFit::support`]). Without a pose (acquiring, re-acquiring) the fit starts
@@ -43,9 +46,10 @@
 //! [`Variant::ForestIcpFeedback`] (the product).
 //!
 //! Memory: the models are borrowed views, all scratch is the caller's ([`Scratch`], sized by [`ScratchSizes`]);
-//! nothing allocates. Cost per tracking frame: the forest (about 1 ms), up to `icp_iterations` ICP iterations
-//! (20-40 µs each), probe mapping (tens of µs) and five packets; an acquiring frame adds the bed search's screening
-//! (0.5-1 ms) and up to six full fits, and a second look a second mean-shift and three fits.
+//! nothing allocates. Cost per tracking frame: up to `icp_iterations` ICP iterations (20-40 µs each), probe mapping
+//! (tens of µs) and five packets, and the forest (about 1 ms) on the frames that need its start (every frame without
+//! a pose); an acquiring frame adds the bed search's screening (0.5-1 ms) and up to six full fits, and a second look
+//! a second mean-shift and three fits.
 
 pub mod accuracy;
 pub mod bed_search;
@@ -293,6 +297,9 @@ pub struct TrackerConfig {
     /// The forest reads pixels higher than this above the mattress and head section as no depth (the arm's links
     /// over the patient), metres; 0 or less: off.
     pub forest_ceiling_m: f32,
+    /// Run the forest on every tracked frame, as the paper's loop does, even where the temporal fit decides the frame
+    /// and its points go unused (the evaluation's `forest_point_mm`); off, the same poses without that forest pass.
+    pub forest_every_frame: bool,
     /// Standard deviation of the feedback prior per axis, metres.
     pub prior_sigma_m: f32,
     /// Torso ICP.
@@ -345,6 +352,7 @@ impl Default for TrackerConfig {
             up_camera: None,
             forest_samples: 0,
             forest_ceiling_m: FOREST_CEILING_M,
+            forest_every_frame: false,
             prior_sigma_m: 0.05,
             icp: TorsoIcpConfig::default(),
             limits: StateLimits::default(),
@@ -600,6 +608,8 @@ pub struct Tracker<'m, 's> {
     interval_us: f32,
     memo_cells: &'s [Cell<MemoCell>],
     memo_stamp: MemoStamp,
+    /// The last forest pass's time, µs: a fit's cost estimate on frames the forest has not run in yet.
+    forest_us: u32,
 }
 
 fn check(buffer: &'static str, expected: usize, found: usize) -> Result<(), TrackerError> {
@@ -776,6 +786,7 @@ impl<'m, 's> Tracker<'m, 's> {
             interval_us: 0.0,
             memo_cells,
             memo_stamp: MemoStamp::default(),
+            forest_us: 0,
         })
     }
 
@@ -909,6 +920,24 @@ impl<'m, 's> Tracker<'m, 's> {
         };
         self.seq = self.seq.wrapping_add(1);
         m
+    }
+
+    /// [`Self::forest`] timed as the frame's forest stage, its points in `report`.
+    #[allow(clippy::too_many_arguments)] // the forest's inputs, the clock and the frame's record
+    fn forest_stage(
+        &mut self,
+        frame: &DepthFrame<'_>,
+        bed: &BedScene,
+        priors: &[Option<Prior>; P],
+        clock: &(impl Clock + ?Sized),
+        watch: &mut Stopwatch,
+        report: &mut FrameReport,
+    ) -> [Option<PointEstimate>; P] {
+        let points = self.forest(frame, bed, priors);
+        watch.lap(clock, Stage::Forest);
+        self.forest_us = watch.times.of(Stage::Forest);
+        report.forest_points = points;
+        points
     }
 
     fn forest(
@@ -1479,12 +1508,17 @@ impl<'m, 's> Tracker<'m, 's> {
                 });
             }
         }
-        let points = self.forest(frame, &t.bed, &priors);
-        report.forest_points = points;
-        watch.lap(clock, Stage::Forest);
-        let forest_pose = forest_pose(&points, &t.salient_torso);
+        // With a pose to fit from, the temporal fit decides most frames and the forest's start is tried only after
+        // it: the forest then runs when that start is needed (same poses, the forest's 1 ms saved on most frames).
+        let lazy =
+            variant == Variant::ForestIcpFeedback && prior_pose.is_some() && !self.cfg.forest_every_frame;
+        let mut points = [None; P];
+        if !lazy {
+            points = self.forest_stage(frame, &t.bed, &priors, clock, watch, report);
+        }
+        let forest_start = forest_pose(&points, &t.salient_torso);
         let (quality, cut) = if variant == Variant::Forest {
-            match forest_pose {
+            match forest_start {
                 Some(p) => {
                     self.pose = Some(p);
                     (FitQuality::Good, false)
@@ -1507,7 +1541,7 @@ impl<'m, 's> Tracker<'m, 's> {
             {
                 let _ = starts.push(p);
             }
-            if let Some(f) = forest_pose {
+            if let Some(f) = forest_start {
                 let _ = starts.push(f);
                 if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
                     for r in rolled(&f) {
@@ -1520,7 +1554,7 @@ impl<'m, 's> Tracker<'m, 's> {
             let icp_cfg = self.cfg.icp;
             if prior_pose.is_none()
                 && variant == Variant::ForestIcpFeedback
-                && let Some(f) = forest_pose
+                && let Some(f) = forest_start
             {
                 for pose in self.screen_bed_starts(frame, &f, &t.bed, &acquire_params, clock, watch) {
                     let _ = starts.push(pose);
@@ -1549,7 +1583,25 @@ impl<'m, 's> Tracker<'m, 's> {
             // The temporal fit, and a far fit that sees more than it (`TorsoIcpConfig::switch_margin`).
             let mut temporal: Option<TorsoFit> = None;
             let mut switch: Option<(Isometry3, TorsoFit)> = None;
-            for (i, start) in starts.iter().enumerate() {
+            let mut forest_ran = !lazy;
+            let mut i = 0;
+            loop {
+                if i == starts.len() {
+                    // The temporal fit did not decide the frame: now the forest's start.
+                    if forest_ran {
+                        break;
+                    }
+                    forest_ran = true;
+                    watch.lap(clock, Stage::Icp);
+                    points = self.forest_stage(frame, &t.bed, &priors, clock, watch, report);
+                    match forest_pose(&points, &t.salient_torso) {
+                        Some(f) => {
+                            let _ = starts.push(f);
+                        }
+                        None => break,
+                    }
+                }
+                let start = &starts[i];
                 let (cfg_i, params_i) = if from_prior(i) {
                     (&temporal_cfg, &temporal_params)
                 } else {
@@ -1616,6 +1668,7 @@ impl<'m, 's> Tracker<'m, 's> {
                 if !self.another_fit_fits(clock, watch) {
                     break;
                 }
+                i += 1;
             }
             // The pose's own fit sees the torso clearly and does not match it: look again from the forest without
             // the prior (which the pose pulls to itself) and its rolls, as an acquisition would.
@@ -1626,6 +1679,11 @@ impl<'m, 's> Tracker<'m, 's> {
                 && let (Some(p), Some(own)) = (prior_pose, temporal)
                 && own.clear_view_mismatch(&icp_cfg)
             {
+                // The second look reads this frame's forest votes.
+                if !forest_ran {
+                    watch.lap(clock, Stage::Icp);
+                    points = self.forest_stage(frame, &t.bed, &priors, clock, watch, report);
+                }
                 switch = self.second_look(frame, &t, &p, &own, &acquire_params, clock, watch);
             }
             // A far fit that sees more of the torso than the pose's own (or, from the second look, has more
@@ -1842,7 +1900,11 @@ impl<'m, 's> Tracker<'m, 's> {
         budget::iteration_fits(
             &self.cfg.budget,
             watch.elapsed(clock),
-            watch.times.of(Stage::Forest) / 4,
+            // A frame that has not run the forest yet estimates a fit from the last pass's time.
+            match watch.times.of(Stage::Forest) {
+                0 => self.forest_us,
+                us => us,
+            } / 4,
         )
     }
 

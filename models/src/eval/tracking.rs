@@ -77,6 +77,10 @@ pub struct TrackingEvalArgs {
     /// hold the right pose.
     #[arg(long)]
     pub oracle_start: bool,
+    /// Diagnostic: the tracker's `forest_every_frame` (off by default): the forest runs on every tracked frame, so
+    /// `forest_point_mm` is reported on every frame; the poses are the same.
+    #[arg(long)]
+    pub forest_every_frame: bool,
     /// The tracker's `search_shape_start` (off by default): the shape refinement starts from a rigid registration
     /// of the estimated torso instead of the forest's points.
     #[arg(long)]
@@ -404,6 +408,7 @@ pub fn run_variant(
     cfg.up_camera = Some(cfg.robot_base_from_camera.inverse().rotation * Vector3::z());
     cfg.budget.frame_us = (args.budget_ms * 1000.0) as u32;
     cfg.search_shape_start = args.search_shape_start;
+    cfg.forest_every_frame = args.forest_every_frame;
     if let Some(a) = args.acquire_from_init {
         cfg.acquire_from_init = a;
     }
