@@ -93,6 +93,14 @@ fn forth_and_back(frames: &[(Vec<u16>, Timestamp)], i: usize) -> (&[u16], Timest
     (&frames[j].0, Timestamp::from_us(1 + i as u64 * 33_333).unwrap())
 }
 
+/// The frames the init phase took: the index of the first frame that ended in another state.
+fn init_frames(states: &[TrackerState]) -> usize {
+    states
+        .iter()
+        .position(|s| *s != TrackerState::Initialising)
+        .expect("init finished")
+}
+
 /// What [`run`] saw.
 struct Run {
     packets: Vec<Message>,
@@ -163,10 +171,7 @@ fn tracks_the_demo_without_allocating_and_replays_bit_identically() {
     // The surface adaptation ran inside the allocation count and early enough for the replays below to cover it.
     let adapted = surface_adapted.expect("the surface adaptation never ran");
     assert!(adapted < 300, "the surface adaptation ran at frame {adapted}");
-    let init = states
-        .iter()
-        .position(|s| *s != TrackerState::Initialising)
-        .expect("init finished");
+    let init = init_frames(&states);
     assert!(init <= 90, "init took {init} frames (3 s)");
     let tracked = states[init..].iter().filter(|s| s.has_pose()).count();
     assert!(
@@ -210,11 +215,7 @@ fn the_forest_runs_only_where_its_start_is_needed_and_the_poses_are_those_of_run
     assert_eq!(a.states, b.states);
     assert_eq!(a.poses, b.poses);
     assert_eq!(a.packets, b.packets);
-    let init = a
-        .states
-        .iter()
-        .position(|s| *s != TrackerState::Initialising)
-        .unwrap();
+    let init = init_frames(&a.states);
     let tracked = a.states[init..].iter().filter(|s| s.has_pose()).count();
     assert!(tracked > 200, "tracked {tracked} frames");
     let after_init = a.states.len() - init;
@@ -237,10 +238,7 @@ fn first_tracked(
     frames: &[(Vec<u16>, Timestamp)],
 ) -> (usize, usize) {
     let states = run(models, cfg, frames, 40).states;
-    let init = states
-        .iter()
-        .position(|s| *s != TrackerState::Initialising)
-        .expect("init finished");
+    let init = init_frames(&states);
     let first = states.iter().position(|s| s.has_pose()).expect("acquired");
     (first, init)
 }
