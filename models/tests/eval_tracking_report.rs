@@ -84,8 +84,9 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
             f["ms"]
         );
     }
-    // No stage's percentile can exceed the whole frame's (each frame's stage time is at most its total), and the
-    // tracked frames run the forest and the ICP.
+    // No stage's percentile can exceed the whole frame's (each frame's stage time is at most its total); the
+    // tracked frames run the ICP, and the forest runs on the frames that need its start (acquisitions, the full
+    // occlusion's frames), a minority of them.
     for st in Stage::ALL.map(Stage::name) {
         for q in ["p50", "p99"] {
             let stage = ms(one, &format!("/stage_ms_{q}/{st}"));
@@ -98,7 +99,7 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
             assert_eq!(stage, ms(summary, &format!("/stage_ms_{q}/{st}")), "{st} {q}");
         }
     }
-    assert!(ms(one, "/stage_ms_p50/forest") > 0.0);
+    assert!(ms(one, "/stage_ms_p99/forest") > 0.0);
     assert!(ms(one, "/stage_ms_p50/icp") > 0.0);
     // Pooled over one sequence's frames, the percentiles are the sequence's own.
     for q in ["p50", "p99"] {
