@@ -591,6 +591,8 @@ pub struct Tracker<'m, 's> {
     last_good_pose: Option<Isometry3>,
     /// The acquisition candidate awaiting confirmation and how many consistent frames found it.
     candidate: Option<(Isometry3, u8)>,
+    /// The near-good acquisition candidate ([`TorsoIcpConfig::near_confirm`]) and how many consistent frames found it.
+    near_candidate: Option<(Isometry3, u8)>,
     /// A far fit that sees more of the torso than the pose's own, awaiting its second frame
     /// ([`TorsoIcpConfig::switch_margin`]).
     switch_candidate: Option<Isometry3>,
@@ -648,6 +650,15 @@ const TRACKED_MAX_HIP_HEIGHT_M: f32 = 0.4;
 /// Least cosine between the chest's outward axis and the mattress normal (lying, rolled or on a raised head
 /// section up to about 60°).
 const MIN_CHEST_UP_COS: f32 = 0.5;
+
+/// The consecutive frames that found `pose` (`found`): one more than `last`'s run when it found the same pose, none
+/// when this frame did not find it.
+fn consistent_run(last: Option<(Isometry3, u8)>, pose: &Isometry3, found: bool, cfg: &TorsoIcpConfig) -> u8 {
+    match last {
+        Some((c, n)) if found && cfg.same_pose(&c, pose) => n.saturating_add(1),
+        _ => u8::from(found),
+    }
+}
 
 /// Whether a torso pose is one of a patient lying on the bed.
 fn lies_on_bed(camera_from_torso: &Isometry3, bed: &BedScene, max_hip_m: f32) -> bool {
@@ -774,6 +785,7 @@ impl<'m, 's> Tracker<'m, 's> {
             pose: None,
             last_good_pose: None,
             candidate: None,
+            near_candidate: None,
             switch_candidate: None,
             support_ref: None,
             pending_refit: None,
@@ -873,6 +885,7 @@ impl<'m, 's> Tracker<'m, 's> {
         self.pose = None;
         self.last_good_pose = None;
         self.candidate = None;
+        self.near_candidate = None;
         self.switch_candidate = None;
         self.support_ref = None;
         self.pending_refit = None;
@@ -1708,13 +1721,21 @@ impl<'m, 's> Tracker<'m, 's> {
             match best {
                 None => {
                     self.candidate = None;
+                    self.near_candidate = None;
                     (FitQuality::Failed, false)
                 }
                 Some((pose, fit, mut q, follows)) => {
                     report.fit = fit;
                     report.fit_pose = Some(pose);
                     if prior_pose.is_none() && variant == Variant::ForestIcpFeedback {
-                        q = self.confirm(pose, &fit, q);
+                        let relaxed = TorsoIcpConfig {
+                            max_rms_m: icp_cfg.near_max_rms_m,
+                            ..icp_cfg
+                        };
+                        let near = icp_cfg.near_confirm > 0
+                            && fit.quality(&relaxed, min_support, true) == FitQuality::Good
+                            && lies_on_bed(&pose, &t.bed, MAX_HIP_HEIGHT_M);
+                        q = self.confirm(pose, &fit, q, near);
                     }
                     match q {
                         FitQuality::Good => {
@@ -1958,17 +1979,21 @@ impl<'m, 's> Tracker<'m, 's> {
 
     /// Acquisition without a pose: a good fit is taken at once when its residual is low, otherwise only once
     /// `acquire_confirm` consecutive frames found the same pose (a wrong local minimum moves with the forest's
-    /// start from frame to frame; the right pose stays).
-    fn confirm(&mut self, pose: Isometry3, fit: &TorsoFit, q: FitQuality) -> FitQuality {
+    /// start from frame to frame; the right pose stays); a near-good fit (`near`) only once
+    /// [`TorsoIcpConfig::near_confirm`] consecutive frames found it.
+    fn confirm(&mut self, pose: Isometry3, fit: &TorsoFit, q: FitQuality, near: bool) -> FitQuality {
         let cfg = self.cfg.icp;
+        let near_run = consistent_run(self.near_candidate, &pose, near, &cfg);
+        self.near_candidate = (near_run > 0).then_some((pose, near_run));
         if q != FitQuality::Good {
             self.candidate = None;
+            if cfg.near_confirm > 0 && near_run >= cfg.near_confirm {
+                self.near_candidate = None;
+                return FitQuality::Good;
+            }
             return q;
         }
-        let run = match self.candidate {
-            Some((c, n)) if cfg.same_pose(&c, &pose) => n.saturating_add(1),
-            _ => 1,
-        };
+        let run = consistent_run(self.candidate, &pose, true, &cfg);
         if fit.sure(&cfg) || run >= cfg.acquire_confirm {
             self.candidate = None;
             FitQuality::Good
@@ -2040,6 +2065,27 @@ impl<'m, 's> Tracker<'m, 's> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_run_of_frames_counts_up_at_the_same_pose_and_restarts_on_a_jump_or_a_miss() {
+        let cfg = TorsoIcpConfig::default();
+        let at = |x: f32| Isometry3::translation(x, 0.0, 1.5);
+        let mut last = None;
+        let mut runs = [0u8; 6];
+        // Found at 0, 1 cm, 2 cm (each within confirm_m of the last), then 10 cm away, then not found, then found.
+        for (r, (x, found)) in runs.iter_mut().zip([
+            (0.0, true),
+            (0.01, true),
+            (0.02, true),
+            (0.12, true),
+            (0.12, false),
+            (0.12, true),
+        ]) {
+            *r = consistent_run(last, &at(x), found, &cfg);
+            last = (*r > 0).then_some((at(x), *r));
+        }
+        assert_eq!(runs, [1, 2, 3, 1, 0, 1]);
+    }
 
     #[test]
     fn a_tracked_hip_may_lie_higher_above_the_mattress_than_an_acquired_one() {

@@ -105,6 +105,14 @@ pub struct TrackingEvalArgs {
     /// points' spacing (the shape model's `LINP` regression).
     #[arg(long)]
     pub shape_point_features: bool,
+    /// The tracker's `near_confirm` (default: the tracker's, 4 since 2026-12-07; 0: off, as before): consecutive
+    /// acquisition frames whose best fit is good but for a residual up to `--near-max-rms-mm`, at the same pose,
+    /// that acquire it.
+    #[arg(long, value_name = "N")]
+    pub near_confirm: Option<u8>,
+    /// The tracker's `near_max_rms_m` in mm (default: the tracker's, 20).
+    #[arg(long, value_name = "MM")]
+    pub near_max_rms_mm: Option<f32>,
     /// The tracker's `occluded_hold_rotation` (default: the tracker's, 0.3): while occluded, the temporal fit's
     /// rotation held at the last pose's, weight per data pair (0: off).
     #[arg(long, value_parser = parse_weight)]
@@ -428,6 +436,12 @@ pub fn run_variant(
         cfg.icp.bed_pitch_weight = w;
     }
     cfg.shape_point_features = args.shape_point_features;
+    if let Some(n) = args.near_confirm {
+        cfg.icp.near_confirm = n;
+    }
+    if let Some(mm) = args.near_max_rms_mm {
+        cfg.icp.near_max_rms_m = mm * 0.001;
+    }
     if let Some(w) = args.hold_rotation {
         cfg.occluded_hold_rotation = w;
     }
