@@ -1703,18 +1703,21 @@ mod tests {
         let floor = (0..26).map(|i| -0.75 + i as f32 * 0.002);
         let values: vec::Vec<f32> = section.chain(strays).chain(floor).collect();
         let own = || values.iter().map(|&v| Some(v));
-        let drops = SECTION_DROPS;
-        let bottom = low_quantile(own, SECTION_BOTTOM_SHARE, &drops);
+        let bottom = low_quantile(own, SECTION_BOTTOM_SHARE, &SECTION_DROPS);
         assert!(bottom.abs() < 0.01, "bottom {bottom}");
         // With the floor's rule alone the lowest stray was the bottom.
-        let floor_only = low_quantile(own, SECTION_BOTTOM_SHARE, &drops[..1]);
+        let floor_only = low_quantile(own, SECTION_BOTTOM_SHARE, &SECTION_DROPS[..1]);
         assert!((floor_only + 0.177).abs() < 0.01, "floor rule alone {floor_only}");
         // Strays more than SECTION_STRAY_MAX_SHARE of the points are the section's own: nothing is dropped.
         let many: vec::Vec<f32> = (0..1200)
             .map(|i| i as f32 * 0.0005)
             .chain((0..60).map(|i| -0.12 + i as f32 * 0.0002))
             .collect();
-        let bottom = low_quantile(|| many.iter().map(|&v| Some(v)), SECTION_BOTTOM_SHARE, &drops);
+        let bottom = low_quantile(
+            || many.iter().map(|&v| Some(v)),
+            SECTION_BOTTOM_SHARE,
+            &SECTION_DROPS,
+        );
         assert!(bottom < -0.1, "bottom {bottom}");
     }
 

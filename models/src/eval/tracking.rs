@@ -111,7 +111,7 @@ pub struct TrackingEvalArgs {
     #[arg(long, value_name = "N")]
     pub near_confirm: Option<u8>,
     /// The tracker's `near_max_rms_m` in mm (default: the tracker's, 20).
-    #[arg(long, value_name = "MM")]
+    #[arg(long, value_name = "MM", value_parser = parse_weight)]
     pub near_max_rms_mm: Option<f32>,
     /// The tracker's `occluded_hold_rotation` (default: the tracker's, 0.3): while occluded, the temporal fit's
     /// rotation held at the last pose's, weight per data pair (0: off).
