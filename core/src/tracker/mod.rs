@@ -1996,7 +1996,9 @@ impl<'m, 's> Tracker<'m, 's> {
         }
         let run = consistent_run(self.candidate, &pose, true, &cfg);
         if fit.sure(&cfg) || run >= cfg.acquire_confirm {
+            // The acquisition ends: neither run may carry over to the next one.
             self.candidate = None;
+            self.near_candidate = None;
             FitQuality::Good
         } else {
             self.candidate = Some((pose, run));
