@@ -308,7 +308,7 @@ impl SequenceData {
     }
 }
 
-pub use super::tracking_truth::sequence_dirs;
+pub use super::tracking_truth::{incomplete_sequence_dirs, sequence_dirs};
 
 /// Per-frame scores of one variant.
 #[derive(Debug, Clone, Default, serde::Serialize)]
@@ -965,6 +965,13 @@ pub fn run(args: &TrackingEvalArgs) -> ExitCode {
 
 fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
     let dirs = sequence_dirs(&args.data)?;
+    let incomplete = incomplete_sequence_dirs(&args.data);
+    for d in &incomplete {
+        eprintln!(
+            "warning: {} left out: frames without a sequence.json (a generation that did not finish)",
+            d.display()
+        );
+    }
     let wanted = variants(&args.variants)?;
     let model_dir = args
         .models
@@ -1031,6 +1038,16 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         report.insert(variant.name().to_string(), r);
     }
     report.insert("sequences".into(), json!(sequences));
+    // What --data held that was not evaluated, so a count short of the folder's says why.
+    report.insert(
+        "incomplete_sequences".into(),
+        json!(
+            incomplete
+                .iter()
+                .map(|d| d.display().to_string())
+                .collect::<Vec<_>>()
+        ),
+    );
     report.insert("commit".into(), json!(crate::provenance::commit()));
     let report = Value::Object(report);
     for (variant, _, _) in &per_variant {

@@ -394,6 +394,25 @@ pub fn sequence_dirs(path: &Path) -> Result<Vec<PathBuf>> {
     Ok(dirs)
 }
 
+/// The subdirectories of `path` that hold a sequence's frames or truth but no `sequence.json` (a generation that did
+/// not finish): [`sequence_dirs`] leaves them out, and the evaluation says so.
+pub fn incomplete_sequence_dirs(path: &Path) -> Vec<PathBuf> {
+    if path.join("sequence.json").is_file() {
+        return Vec::new();
+    }
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(path)
+        .into_iter()
+        .flatten()
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| {
+            !p.join("sequence.json").is_file()
+                && (p.join("sequence.oni").is_file() || p.join("truth.jsonl").is_file())
+        })
+        .collect();
+    dirs.sort();
+    dirs
+}
+
 fn read_arm(dir: &Path, stream: &arm_stream::ArmStream) -> Result<Vec<ArmSample>> {
     let path = dir.join(&stream.file);
     ensure!(
@@ -583,8 +602,16 @@ mod tests {
         reset();
         assert_eq!(sequence_dirs(&copy).unwrap(), vec![copy.clone()]);
         assert!(sequence_dirs(copy.parent().unwrap()).unwrap().contains(&copy));
+        assert!(!incomplete_sequence_dirs(copy.parent().unwrap()).contains(&copy));
         std::fs::remove_file(copy.join("sequence.json")).unwrap();
         assert!(err(&copy).contains("not a sequence directory"));
+        // Frames without their sequence.json: left out of the folder's sequences, and named as incomplete.
+        assert!(
+            !sequence_dirs(copy.parent().unwrap())
+                .unwrap_or_default()
+                .contains(&copy)
+        );
+        assert!(incomplete_sequence_dirs(copy.parent().unwrap()).contains(&copy));
         assert!(
             sequence_dirs(&copy)
                 .unwrap_err()

@@ -469,7 +469,12 @@ pub fn find_park_pose(
         }
     }
     let (_, target, fraction, distance) =
-        best.ok_or_else(|| anyhow::anyhow!("no reachable arm pose between the head and the torso"))?;
+        best.ok_or_else(|| {
+            anyhow::anyhow!(
+                "no reachable arm pose between the head and the torso for the full occlusion (seed {seed}: another \
+                 seed places the patient, the bed and the arm differently)"
+            )
+        })?;
     Ok((target, fraction, distance))
 }
 

@@ -355,7 +355,8 @@ pub fn breathe(body: &mut PosedBody<'_>, torso_parts: &[u8], rise: f32) {
 }
 
 /// Generate a sequence into `dir`; `on_frame` is called after each frame with its index and the noisy depth image
-/// written to the .oni (the ground truth a replay must reproduce pixel for pixel).
+/// written to the .oni (the ground truth a replay must reproduce pixel for pixel). A generation that fails leaves
+/// no half-written sequence behind ([`remove_partial`]).
 pub fn generate(
     source: &dyn BodySource,
     cfg: &SequenceConfig,
@@ -363,7 +364,52 @@ pub fn generate(
     on_frame: &mut dyn FnMut(u32, &[u16]),
 ) -> Result<SequenceSummary> {
     ensure!(cfg.frames > 0, "need at least one frame");
+    let created = !dir.exists();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    generate_into(source, cfg, dir, on_frame).map_err(|e| {
+        remove_partial(dir, created);
+        e.context(format!(
+            "generating {} (its partial output removed)",
+            dir.display()
+        ))
+    })
+}
+
+/// The files a sequence's generation writes into its directory, besides the `preview_*.png`.
+const OUTPUTS: [&str; 5] = [
+    "sequence.oni",
+    "truth.jsonl",
+    torso_truth::FILE_NAME,
+    arm_stream::FILE_NAME,
+    "sequence.json",
+];
+
+/// Remove what a failed generation left in `dir`: the directory when the generation created it, else the files a
+/// generation writes (a directory of other files keeps them). Frames written before the failure would otherwise
+/// read as a sequence cut short, or beside an earlier `sequence.json`, as that one's sequence.
+fn remove_partial(dir: &Path, created: bool) {
+    if created {
+        let _ = std::fs::remove_dir_all(dir);
+        return;
+    }
+    for name in OUTPUTS {
+        let _ = std::fs::remove_file(dir.join(name));
+    }
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if name.starts_with("preview_") && name.ends_with(".png") {
+            let _ = std::fs::remove_file(entry.path());
+        }
+    }
+}
+
+fn generate_into(
+    source: &dyn BodySource,
+    cfg: &SequenceConfig,
+    dir: &Path,
+    on_frame: &mut dyn FnMut(u32, &[u16]),
+) -> Result<SequenceSummary> {
     let started = std::time::Instant::now();
     let k = Intrinsics::KINECT_V1;
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, 0x5E0));
@@ -661,6 +707,38 @@ pub fn generate(
 mod tests {
     use super::*;
     use crate::scene::body::{MANNEQUIN_PARTS, Mannequin};
+
+    #[test]
+    fn a_failed_generation_leaves_no_sequence_behind() {
+        let root = std::env::temp_dir().join(format!("supine-partial-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        let write_outputs = |dir: &Path| {
+            std::fs::create_dir_all(dir).unwrap();
+            for name in OUTPUTS
+                .iter()
+                .copied()
+                .chain(["preview_00000.png", "preview_00045.png"])
+            {
+                std::fs::write(dir.join(name), b"partial").unwrap();
+            }
+        };
+        // A directory the generation created goes entirely.
+        let created = root.join("created");
+        write_outputs(&created);
+        remove_partial(&created, true);
+        assert!(!created.exists());
+        // In a directory that was there before, only what a generation writes goes.
+        let given = root.join("given");
+        write_outputs(&given);
+        std::fs::write(given.join("notes.txt"), b"the user's").unwrap();
+        remove_partial(&given, false);
+        let left: Vec<String> = std::fs::read_dir(&given)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        assert_eq!(left, ["notes.txt"]);
+        std::fs::remove_dir_all(&root).unwrap();
+    }
 
     #[test]
     fn breathing_lifts_the_chest_front_only() {
