@@ -170,7 +170,8 @@ fn pose_at(poses: &[Pose], fps: f32, t: f32) -> (Pose, Option<u32>, usize) {
     )
 }
 
-/// Generate a calibration sequence of `cfg.frames` frames into `dir`; `on_frame` is called after each frame.
+/// Generate a calibration sequence of `cfg.frames` frames into `dir`; `on_frame` is called after each frame. A
+/// generation that fails leaves nothing behind (`super::remove_partial`).
 pub fn generate_calibration(
     source: &dyn BodySource,
     cfg: &SequenceConfig,
@@ -183,7 +184,16 @@ pub fn generate_calibration(
         "a calibration sequence needs at least {} frames (4 poses of {FRAMES_PER_POSE})",
         FRAMES_PER_POSE * 4
     );
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    super::into_dir(dir, || calibration_into(source, cfg, cal, dir, on_frame))
+}
+
+fn calibration_into(
+    source: &dyn BodySource,
+    cfg: &SequenceConfig,
+    cal: &CalibrationConfig,
+    dir: &Path,
+    on_frame: &mut dyn FnMut(u32, &[u16]),
+) -> Result<CalibrationMeta> {
     let k = Intrinsics::KINECT_V1;
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, 0xCA1));
     let (shape_seed, pose_a, pose_b) = (rng.r#gen::<u64>(), rng.r#gen::<u64>(), rng.r#gen::<u64>());

@@ -194,12 +194,7 @@ fn run_inner(args: &SequenceArgs) -> anyhow::Result<()> {
     if args.calibration {
         return run_calibration(args, source.as_ref(), &cfg);
     }
-    let bar = ProgressBar::with_draw_target(Some(args.frames as u64), ProgressDrawTarget::stderr());
-    bar.set_style(
-        ProgressStyle::with_template("{elapsed_precise} [{bar:40}] {pos}/{len} frames  {per_sec}  eta {eta}")
-            .map_err(|e| anyhow::anyhow!("progress template: {e}"))?
-            .progress_chars("=> "),
-    );
+    let bar = progress(args.frames)?;
     let summary = generate(source.as_ref(), &cfg, &args.out, &mut |_, _| bar.inc(1))?;
     bar.finish();
     eprintln!(

@@ -364,9 +364,14 @@ pub fn generate(
     on_frame: &mut dyn FnMut(u32, &[u16]),
 ) -> Result<SequenceSummary> {
     ensure!(cfg.frames > 0, "need at least one frame");
+    into_dir(dir, || generate_into(source, cfg, dir, on_frame))
+}
+
+/// Run `write` into `dir` (created when missing); when it fails, remove what it wrote ([`remove_partial`]).
+pub(crate) fn into_dir<T>(dir: &Path, write: impl FnOnce() -> Result<T>) -> Result<T> {
     let created = !dir.exists();
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    generate_into(source, cfg, dir, on_frame).map_err(|e| {
+    write().map_err(|e| {
         remove_partial(dir, created);
         e.context(format!(
             "generating {} (its partial output removed)",
@@ -375,7 +380,8 @@ pub fn generate(
     })
 }
 
-/// The files a sequence's generation writes into its directory, besides the `preview_*.png`.
+/// The files a sequence's generation (tracking or calibration) writes into its directory, besides the
+/// `preview_*.png`.
 const OUTPUTS: [&str; 5] = [
     "sequence.oni",
     "truth.jsonl",
