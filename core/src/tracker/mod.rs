@@ -21,9 +21,10 @@
 //! from the forest's pose, that pose turned about the body axis, and the torso laid on the bed around it
 //! ([`bed_search`]); a good fit is trusted at once only when its residual is very low, otherwise once consecutive
 //! frames agree on it, and a fit good but for its residual once four frames in a row agree on it
-//! ([`TorsoIcpConfig::near_confirm`]: an init shape far off keeps even the right pose over the bar); while tracking, a good fit from a start other than the temporal one that lands far from it
-//! is not trusted (the patient does not jump), unless the pose's own fit is not good and the far fit sees clearly
-//! more of the torso on two frames in a row: then the pose was a wrong lock ([`TorsoIcpConfig::switch_margin`]).
+//! ([`TorsoIcpConfig::near_confirm`]: an init shape far off keeps even the right pose over the bar); while
+//! tracking, a good fit from a start other than the temporal one that lands far from it is not trusted (the patient
+//! does not jump), unless the pose's own fit is not good and the far fit sees clearly more of the torso on two frames
+//! in a row: then the pose was a wrong lock ([`TorsoIcpConfig::switch_margin`]).
 //! When the pose's own fit sees a clear view of the torso that it does not match (enough of it seen, too little
 //! support), the frame looks again as an acquisition would, from the forest without the prior, and a far fit with
 //! clearly more support replaces the pose on two frames in a row ([`TorsoIcpConfig::clear_view_min_support`]).

@@ -470,12 +470,9 @@ pub fn sequence_dirs(data: &Path) -> Result<Vec<PathBuf>> {
     if data.join("sequence.json").is_file() {
         return Ok(vec![data.to_owned()]);
     }
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(data)
-        .with_context(|| format!("reading {}", data.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join("sequence.json").is_file() && p.join("arm.cobs").is_file())
-        .collect();
-    dirs.sort();
+    let dirs = super::tracking_truth::subdirectories(data, |p| {
+        p.join("sequence.json").is_file() && p.join("arm.cobs").is_file()
+    })?;
     if dirs.is_empty() {
         bail!(
             "{} holds no calibration sequence (make one with `supine-models sequence --calibration --out DIR`)",

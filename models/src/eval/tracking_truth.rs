@@ -380,17 +380,23 @@ pub fn sequence_dirs(path: &Path) -> Result<Vec<PathBuf>> {
     if path.join("sequence.json").is_file() {
         return Ok(vec![path.to_path_buf()]);
     }
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(path)
-        .with_context(|| format!("reading {}", path.display()))?
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.join("sequence.json").is_file())
-        .collect();
-    dirs.sort();
+    let dirs = subdirectories(path, |p| p.join("sequence.json").is_file())?;
     ensure!(
         !dirs.is_empty(),
         "{} holds no sequence (no sequence.json in it or its subdirectories)",
         path.display()
     );
+    Ok(dirs)
+}
+
+/// `path`'s subdirectories that `keep` accepts, sorted by name.
+pub fn subdirectories(path: &Path, keep: impl Fn(&Path) -> bool) -> Result<Vec<PathBuf>> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(path)
+        .with_context(|| format!("reading {}", path.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| keep(p))
+        .collect();
+    dirs.sort();
     Ok(dirs)
 }
 
@@ -400,17 +406,11 @@ pub fn incomplete_sequence_dirs(path: &Path) -> Vec<PathBuf> {
     if path.join("sequence.json").is_file() {
         return Vec::new();
     }
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(path)
-        .into_iter()
-        .flatten()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| {
-            !p.join("sequence.json").is_file()
-                && (p.join("sequence.oni").is_file() || p.join("truth.jsonl").is_file())
-        })
-        .collect();
-    dirs.sort();
-    dirs
+    subdirectories(path, |p| {
+        !p.join("sequence.json").is_file()
+            && (p.join("sequence.oni").is_file() || p.join("truth.jsonl").is_file())
+    })
+    .unwrap_or_default()
 }
 
 fn read_arm(dir: &Path, stream: &arm_stream::ArmStream) -> Result<Vec<ArmSample>> {
