@@ -7,7 +7,7 @@
 use crate::camera::Intrinsics;
 use crate::forest::feature::{DepthImage, ProbeOrigin, ProbeScale};
 use crate::forest::meanshift::{Prior, Vote, VoteBuffer, mean_shift};
-use crate::forest::model::{ForestModel, Node};
+use crate::forest::model::{ForestModel, Node, decode_node};
 use crate::forest::sample::{Ceiling, Clip, SamplePixel, sample_pixels};
 use crate::forest::{MAX_SAMPLES, MAX_TREES, MAX_VOTES, MODES};
 use crate::geometry::{Plane, Point3};
@@ -129,26 +129,13 @@ fn band_order(samples: &[SamplePixel], order: &mut [u16]) {
     }
 }
 
-/// One lockstep step of a descent at node `at` of tree `t`: the node the sample goes to next (a leaf stays where it
-/// is) and whether `at` is a leaf. Branch-free on the test's outcome, which the predictor cannot learn.
-#[inline(always)]
-fn step<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
-    model: &M,
-    t: usize,
-    at: u32,
-    img: &D,
-    o: ProbeOrigin,
-) -> (u32, bool) {
-    match model.node(t, at) {
-        Node::Leaf(_) => (at, true),
-        Node::Split { test, left } => (left + u32::from(!test.goes_left_from(img, o)), false),
-    }
-}
-
 /// The leaves of every sample in every tree (`leaves[i][..trees]` for `samples[i]`, the same leaves as [`descend`]):
 /// samples are taken in band order, [`GROUP`] at a time, and all their trees descended in lockstep, a lane that
 /// reached its leaf staying there until the group's deepest lane is done, so that up to `GROUP * trees` independent
-/// chains of node and depth loads overlap and the loop has one well-predicted branch per level.
+/// chains of node and depth loads overlap and the loop's only branch, the leaf test, is well predicted. A lane carries
+/// its node's record ([`ForestModel::record`]) and loads both children's with the node's probes, so a level costs
+/// the slower of the two loads, not their sum (about 0.8x the time of descending by child index,
+/// `docs/joint-forest.md`).
 fn descend_samples<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     model: &M,
     trees: usize,
@@ -180,8 +167,12 @@ fn descend_samples_n<const T: usize, M: ForestModel + ?Sized, D: DepthImage + ?S
     let trees = T;
     let order = &mut order[..samples.len()];
     band_order(samples, order);
+    let roots: [u64; T] = core::array::from_fn(|t| model.record(t, 0));
     for group in order.chunks(GROUP) {
-        let mut at = [[0u32; MAX_TREES]; GROUP];
+        let mut at = [[0u64; MAX_TREES]; GROUP];
+        for a in at.iter_mut() {
+            a[..T].copy_from_slice(&roots);
+        }
         let mut px = [ProbeOrigin::new(0, 0, ProbeScale::new(0)); GROUP];
         for (g, &i) in group.iter().enumerate() {
             let s = &samples[i as usize];
@@ -190,10 +181,19 @@ fn descend_samples_n<const T: usize, M: ForestModel + ?Sized, D: DepthImage + ?S
         loop {
             let mut done = true;
             for (a, &p) in at.iter_mut().zip(&px).take(group.len()) {
-                for t in 0..trees {
-                    let (next, leaf) = step(model, t, a[t], img, p);
-                    a[t] = next;
-                    done &= leaf;
+                for (t, r) in a.iter_mut().enumerate().take(trees) {
+                    if let Node::Split { test, left } = decode_node(*r) {
+                        // Both children load while the probes are read: the next level's node does not wait on
+                        // this level's depths. The choice is a select, branch-free on the test's outcome, which the
+                        // predictor cannot learn.
+                        let kids = model.child_records(t, left);
+                        *r = if test.goes_left_from(img, p) {
+                            kids[0]
+                        } else {
+                            kids[1]
+                        };
+                        done = false;
+                    }
                 }
             }
             if done {
@@ -202,7 +202,7 @@ fn descend_samples_n<const T: usize, M: ForestModel + ?Sized, D: DepthImage + ?S
         }
         for (a, &i) in at.iter().zip(group.iter()) {
             for t in 0..trees {
-                if let Node::Leaf(l) = model.node(t, a[t]) {
+                if let Node::Leaf(l) = decode_node(a[t]) {
                     leaves[i as usize][t] = l;
                 }
             }

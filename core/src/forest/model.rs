@@ -120,6 +120,38 @@ pub fn node_words(test: Option<SplitTest>, index: u32) -> Option<[u32; 2]> {
     }
 }
 
+/// `node` as a `NODE` record: its two [`node_words`] as one little-endian u64 ([`decode_node`] gives it back).
+/// Every forest here fits the record: the trainer draws thresholds within i8 and refuses trees beyond 2^23 nodes or
+/// leaves, and [`ForestView::parse`] checks the file's.
+#[inline]
+pub fn node_record(node: Node) -> u64 {
+    let (test, index) = match node {
+        Node::Split { test, left } => (Some(test), left),
+        Node::Leaf(l) => (None, l),
+    };
+    let words = node_words(test, index);
+    debug_assert!(words.is_some(), "{node:?} does not fit a NODE record");
+    let [w0, w1] = words.unwrap_or([0, (NODE_LEAF | MAX_NODE_INDEX) << 8]);
+    u64::from(w0) | (u64::from(w1) << 32)
+}
+
+/// The node a `NODE` record (its two words as one little-endian u64) holds; [`node_record`]'s inverse.
+#[inline]
+pub fn decode_node(r: u64) -> Node {
+    let w1 = (r >> 32) as u32;
+    let c = w1 >> 8;
+    if c & NODE_LEAF != 0 {
+        return Node::Leaf(c & !NODE_LEAF);
+    }
+    let [ux, uy, vx, vy] = (r as u32).to_le_bytes();
+    let test = SplitTest {
+        u: [ux as i8, uy as i8],
+        v: [vx as i8, vy as i8],
+        threshold_mm: w1 as u8 as i8 as i16,
+    };
+    Node::Split { test, left: c }
+}
+
 /// Section tags.
 pub mod tags {
     use crate::model_file::Tag;
@@ -189,6 +221,18 @@ pub trait ForestModel {
     fn tree_count(&self) -> usize;
     /// Node `index` of tree `tree` (index 0 is the root). Callers only pass indices reached by descent.
     fn node(&self, tree: usize, index: u32) -> Node;
+    /// Node `index` of tree `tree` as a `NODE` record ([`node_record`]), the form the lockstep descent carries from
+    /// level to level. The default packs [`Self::node`]; a model that stores records reads them.
+    #[inline]
+    fn record(&self, tree: usize, index: u32) -> u64 {
+        node_record(self.node(tree, index))
+    }
+    /// The records of nodes `left` and `left + 1` of tree `tree`: a split's two children, which the descent loads
+    /// before its test is decided.
+    #[inline]
+    fn child_records(&self, tree: usize, left: u32) -> [u64; 2] {
+        [self.record(tree, left), self.record(tree, left + 1)]
+    }
     /// Refined vote of `leaf` for point `point` (Eq. 2 weight and Eq. 6 confidence).
     fn refined(&self, leaf: u32, point: usize) -> LeafVote;
     /// Baseline mode `mode` of `leaf` for point `point` (weight 0 where the model stores no baseline).
@@ -402,19 +446,25 @@ impl ForestModel for ForestView<'_> {
         // One 8-byte load per record (one bounds check), the word order of the file.
         let mut b = [0u8; 8];
         b.copy_from_slice(&self.nodes[g * 8..g * 8 + 8]);
-        let r = u64::from_le_bytes(b);
-        let w1 = (r >> 32) as u32;
-        let c = w1 >> 8;
-        if c & NODE_LEAF != 0 {
-            return Node::Leaf(c & !NODE_LEAF);
-        }
-        let [ux, uy, vx, vy] = (r as u32).to_le_bytes();
-        let test = SplitTest {
-            u: [ux as i8, uy as i8],
-            v: [vx as i8, vy as i8],
-            threshold_mm: w1 as u8 as i8 as i16,
-        };
-        Node::Split { test, left: c }
+        decode_node(u64::from_le_bytes(b))
+    }
+
+    #[inline]
+    fn record(&self, tree: usize, index: u32) -> u64 {
+        let g = (self.tree_start[tree] + index) as usize;
+        let mut b = [0u8; 8];
+        b.copy_from_slice(&self.nodes[g * 8..g * 8 + 8]);
+        u64::from_le_bytes(b)
+    }
+
+    #[inline]
+    fn child_records(&self, tree: usize, left: u32) -> [u64; 2] {
+        let g = (self.tree_start[tree] + left) as usize;
+        // The sibling pair is adjacent: one 16-byte load (one bounds check).
+        let mut b = [0u8; 16];
+        b.copy_from_slice(&self.nodes[g * 8..g * 8 + 16]);
+        let r = u128::from_le_bytes(b);
+        [r as u64, (r >> 64) as u64]
     }
 
     #[inline]
@@ -581,11 +631,8 @@ mod tests {
             p.tree[t] = v.tree_start[t];
             for i in 0..(v.tree_start[t + 1] - v.tree_start[t]) {
                 let g = (v.tree_start[t] + i) as usize;
-                let w = match v.node(t, i) {
-                    Node::Leaf(l) => node_words(None, l),
-                    Node::Split { test, left } => node_words(Some(test), left),
-                };
-                p.nodes[g * 2..g * 2 + 2].copy_from_slice(&w.unwrap());
+                let r = node_record(v.node(t, i));
+                p.nodes[g * 2..g * 2 + 2].copy_from_slice(&[r as u32, (r >> 32) as u32]);
             }
         }
         for l in 0..v.leaf_count() {
@@ -626,6 +673,45 @@ mod tests {
         assert_eq!(confidence_code(0.0), NO_VOTE);
         assert_eq!(confidence_code(1.0), 0);
         assert_eq!(confidence_code(1e-30), NO_VOTE - 1);
+    }
+
+    #[test]
+    fn node_records_are_the_files_words_and_decode_to_the_nodes() {
+        let mut a = [0u8; 4096];
+        let n = encode(&parts(), KIND, &mut a);
+        let v = ForestView::parse(&a[..n]).unwrap();
+        let p = parts();
+        for t in 0..v.tree_count() {
+            for i in 0..(v.tree_start[t + 1] - v.tree_start[t]) {
+                let g = (v.tree_start[t] + i) as usize;
+                let words = u64::from(p.nodes[g * 2]) | (u64::from(p.nodes[g * 2 + 1]) << 32);
+                let node = v.node(t, i);
+                assert_eq!((v.record(t, i), node_record(node)), (words, words));
+                assert_eq!(decode_node(words), node);
+            }
+        }
+        // A model that stores nodes, not records, gives the same records through the trait's defaults.
+        struct Nodes<'a>(ForestView<'a>);
+        impl ForestModel for Nodes<'_> {
+            fn tree_count(&self) -> usize {
+                self.0.tree_count()
+            }
+            fn node(&self, tree: usize, index: u32) -> Node {
+                self.0.node(tree, index)
+            }
+            fn refined(&self, leaf: u32, point: usize) -> LeafVote {
+                self.0.refined(leaf, point)
+            }
+            fn baseline(&self, leaf: u32, point: usize, mode: usize) -> LeafVote {
+                self.0.baseline(leaf, point, mode)
+            }
+            fn params(&self, point: usize) -> PointParams {
+                self.0.params(point)
+            }
+        }
+        let pair = [v.record(0, 1), v.record(0, 2)];
+        assert_eq!(v.child_records(0, 1), pair);
+        assert_eq!(Nodes(v).child_records(0, 1), pair);
     }
 
     #[test]

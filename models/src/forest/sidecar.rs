@@ -91,6 +91,12 @@ impl ForestModel for FloatLeaves<'_> {
     fn node(&self, tree: usize, index: u32) -> Node {
         self.view.node(tree, index)
     }
+    fn record(&self, tree: usize, index: u32) -> u64 {
+        self.view.record(tree, index)
+    }
+    fn child_records(&self, tree: usize, left: u32) -> [u64; 2] {
+        self.view.child_records(tree, left)
+    }
     fn refined(&self, leaf: u32, point: usize) -> LeafVote {
         let b = leaf as usize * PER_LEAF;
         let o = &self.leaves[b + point * 3..b + point * 3 + 3];

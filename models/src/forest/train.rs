@@ -406,6 +406,12 @@ pub fn train_on(
         leaf_base.push(n_leaves);
         n_leaves += t.leaves;
     }
+    // What a `NODE` record holds (the inference's descent carries records, the file stores them).
+    let most = supine_core::forest::model::MAX_NODE_INDEX as usize + 1;
+    ensure!(
+        n_leaves as usize <= most && trees.iter().all(|t| t.nodes.len() <= most),
+        "the trees grew more than {most} leaves or nodes per tree, more than a model file holds: raise --min-split"
+    );
     let mut leaves = vec![[0u32; MAX_TREES]; samples.len()];
     let pb = bar(bodies.len() as u64, "leaves", progress);
     // Every body has `views` images (checked in pass 1), so body `bi`'s images start at `bi * views`.
