@@ -12,10 +12,10 @@ use criterion::{Criterion, criterion_main};
 use std::hint::black_box;
 use supine_core::camera::Intrinsics;
 use supine_core::depth::DepthFrame;
-use supine_core::forest::infer::{InferConfig, Method, Workspace, descend, estimate, estimate_from_leaves};
-use supine_core::forest::model::{ForestModel, ForestView};
-use supine_core::forest::sample::{Clip, SamplePixel, sample_pixels};
-use supine_core::forest::{MAX_SAMPLES, MAX_TREES, meanshift::Vote};
+use supine_core::forest::MAX_SAMPLES;
+use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate, reestimate, sample_and_descend};
+use supine_core::forest::model::ForestView;
+use supine_core::forest::sample::Clip;
 use supine_core::geometry::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3, isometry_from_rows};
 use supine_core::icp::{IcpParams, point_to_plane_step};
 use supine_core::planes::{PlaneConfig, estimate_bed, scratch_points};
@@ -70,53 +70,28 @@ fn bench(c: &mut Criterion) {
         })
     });
 
-    // Forest: 512 samples of the clip and their descent through every tree; then the votes and six mean-shifts.
+    // Forest: 512 samples of the clip and their descent through every tree (the lockstep descent `estimate` runs);
+    // then the votes and six mean-shifts from those leaves; then both (`estimate`).
     let fbytes =
         std::fs::read(supine_models::forest::cli::default_path()).expect("models/artifacts/joints.jfor");
     let forest = ForestView::parse(&fbytes).expect("valid default forest");
     let planes = [mattress, meta.planes_camera[2]];
     let clip = Clip::over_image(&planes, &k);
     let samples = forest.samples_per_frame().min(MAX_SAMPLES);
-    let mut px = vec![SamplePixel::default(); samples];
-    let mut leaves = vec![[0u32; MAX_TREES]; samples];
-    g.bench_function("forest_sample_descend", |b| {
-        b.iter(|| {
-            let n = sample_pixels(&frame, &k, &clip, 7, &mut px);
-            for (s, row) in px[..n].iter().zip(leaves.iter_mut()) {
-                for (t, l) in row.iter_mut().enumerate().take(forest.tree_count()) {
-                    *l = descend(&forest, t, &frame, s.x as i32, s.y as i32, s.d_mm);
-                }
-            }
-            black_box(n)
-        })
-    });
-    let n = sample_pixels(&frame, &k, &clip, 7, &mut px);
-    for (s, row) in px[..n].iter().zip(leaves.iter_mut()) {
-        for (t, l) in row.iter_mut().enumerate().take(forest.tree_count()) {
-            *l = descend(&forest, t, &frame, s.x as i32, s.y as i32, s.d_mm);
-        }
-    }
-    let positions: Vec<[f32; 3]> = px[..n].iter().map(|s| s.p).collect();
-    let mut votes = vec![Vote::default(); supine_core::forest::MAX_VOTES];
-    let none = [None; SalientPoint::COUNT];
-    g.bench_function("mean_shift", |b| {
-        b.iter(|| {
-            black_box(estimate_from_leaves(
-                &forest,
-                Method::Refined,
-                &positions,
-                &leaves[..n],
-                &none,
-                &mut votes,
-            ))
-        })
-    });
     let mut ws = Box::new(Workspace::new());
     let icfg = InferConfig {
         samples,
         seed: 7,
         method: Method::Refined,
     };
+    let none = [None; SalientPoint::COUNT];
+    g.bench_function("forest_sample_descend", |b| {
+        b.iter(|| black_box(sample_and_descend(&forest, &frame, &k, &clip, &icfg, &mut ws)))
+    });
+    sample_and_descend(&forest, &frame, &k, &clip, &icfg, &mut ws);
+    g.bench_function("mean_shift", |b| {
+        b.iter(|| black_box(reestimate(&forest, Method::Refined, &none, &mut ws)))
+    });
     g.bench_function("forest_total", |b| {
         b.iter(|| black_box(estimate(&forest, &frame, &k, &clip, &icfg, &none, &mut ws)))
     });

@@ -17,7 +17,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 
 STAGES = [
     ("clip", "clip: volume of interest over all 307 k pixels"),
-    ("forest_sample_descend", "forest: 512 samples, descent through every tree"),
+    ("forest_sample_descend", "forest: 512 samples, lockstep descent through every tree"),
     ("mean_shift", "mean-shift: votes and six modes"),
     ("forest_total", "forest + mean-shift (`estimate`)"),
     ("canonical_view", "canonical view"),

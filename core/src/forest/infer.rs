@@ -339,6 +339,20 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
     priors: &[Option<Prior>; P],
     ws: &mut Workspace,
 ) -> [Option<PointEstimate>; P] {
+    sample_and_descend(model, img, k, clip, cfg, ws);
+    reestimate(model, cfg.method, priors, ws)
+}
+
+/// [`estimate`] up to the leaves: warm the clip's rows, sample `cfg.samples` kept pixels and descend every tree,
+/// into `ws` for [`reestimate`]; returns how many samples were drawn.
+pub fn sample_and_descend<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
+    model: &M,
+    img: &D,
+    k: &Intrinsics,
+    clip: &Clip<'_>,
+    cfg: &InferConfig,
+    ws: &mut Workspace,
+) -> usize {
     let want = cfg.samples.min(MAX_SAMPLES);
     img.warm_rows(clip.region.v0, clip.region.v1.min(k.height));
     let n = sample_pixels(img, k, clip, cfg.seed, &mut ws.samples[..want]);
@@ -352,7 +366,7 @@ pub fn estimate<M: ForestModel + ?Sized, D: DepthImage + ?Sized>(
         &mut ws.leaves[..n],
     );
     ws.last = n;
-    reestimate(model, cfg.method, priors, ws)
+    n
 }
 
 /// One frame as the tracker reads it: [`estimate`] over the whole image above the bed `planes`
