@@ -317,13 +317,16 @@ impl<'a> ForestView<'a> {
             let (s, e) = (tree_start[t], tree_start[t + 1]);
             let n = e - s;
             for i in 0..n {
-                let c = node_words.at((s + i) as usize * 2 + 1) >> 8;
-                if c & NODE_LEAF != 0 {
-                    if (c & !NODE_LEAF) as usize >= leaves {
+                let g = (s + i) as usize * 2;
+                let record = u64::from(node_words.at(g)) | (u64::from(node_words.at(g + 1)) << 32);
+                match decode_node(record) {
+                    Node::Leaf(l) if l as usize >= leaves => {
                         return Err(invalid(tags::NODE, "leaf id out of range"));
                     }
-                } else if c <= i || c + 1 >= n {
-                    return Err(invalid(tags::NODE, "child index not forward within its tree"));
+                    Node::Split { left, .. } if left <= i || left + 1 >= n => {
+                        return Err(invalid(tags::NODE, "child index not forward within its tree"));
+                    }
+                    _ => {}
                 }
             }
         }
@@ -442,16 +445,13 @@ impl ForestModel for ForestView<'_> {
 
     #[inline]
     fn node(&self, tree: usize, index: u32) -> Node {
-        let g = (self.tree_start[tree] + index) as usize;
-        // One 8-byte load per record (one bounds check), the word order of the file.
-        let mut b = [0u8; 8];
-        b.copy_from_slice(&self.nodes[g * 8..g * 8 + 8]);
-        decode_node(u64::from_le_bytes(b))
+        decode_node(self.record(tree, index))
     }
 
     #[inline]
     fn record(&self, tree: usize, index: u32) -> u64 {
         let g = (self.tree_start[tree] + index) as usize;
+        // One 8-byte load per record (one bounds check), the word order of the file.
         let mut b = [0u8; 8];
         b.copy_from_slice(&self.nodes[g * 8..g * 8 + 8]);
         u64::from_le_bytes(b)
