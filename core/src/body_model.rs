@@ -118,6 +118,15 @@ impl BodyPart {
         })
     }
 
+    /// Whether the part is an upper arm, a forearm or a hand.
+    pub const fn is_arm(self) -> bool {
+        use BodyPart::*;
+        matches!(
+            self,
+            LeftUpperArm | RightUpperArm | LeftForearm | RightForearm | LeftHand | RightHand
+        )
+    }
+
     /// The snake_case name (`left_upper_arm`, ...).
     pub const fn name(self) -> &'static str {
         use BodyPart::*;

@@ -3,7 +3,7 @@
 
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
-use supine_core::body_model::BodyModelView;
+use supine_core::body_model::{BodyModelView, BodyPart};
 use supine_core::model_file::ModelFileError;
 use supine_core::salient::SalientPoint;
 use supine_models::body::file::{BodyFileData, quantise_basis, write_body_model};
@@ -390,4 +390,97 @@ fn canonical_sub_poses_do_what_they_say() {
         "legs flat on a raised bed: knee {:?}",
         k(&up, "l")
     );
+}
+
+#[test]
+fn a_hand_under_the_head_does_not_hold_the_back_off_the_mattress() {
+    let m = model();
+    let sampler = BedPoseSampler::new(&m);
+    let i = (0..COMBINATIONS)
+        .find(|&i| {
+            format!("{:?}", BedPoseSampler::combination(i)) == "(Neutral, SupportingHead, AtSide, Straight)"
+        })
+        .unwrap();
+    let bed = sampler.canonical(i, Lying::SUPINE);
+    // Of a few bodies, the one whose hand reaches lowest under its head (on the mean body it is level with the back).
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
+    let posed = (0..12)
+        .map(|_| m.pose(&m.sample_shape(&mut rng), &bed.pose))
+        .max_by(|p, q| {
+            let drop = |b: &supine_models::body::PosedBody<'_>| {
+                let t = bed.lying.bed_from_trunk(b);
+                let hand = b.joints[m.joint_index("joint-l-hand").unwrap()];
+                -(t * nalgebra::Point3::from(hand)).z
+            };
+            drop(p).total_cmp(&drop(q))
+        })
+        .unwrap();
+    let lowest = |t: &nalgebra::Isometry3<f32>, arms: bool| {
+        posed
+            .vertices
+            .iter()
+            .zip(posed.part_of_vertex.iter())
+            .filter(|&(_, &p)| arms || !BodyPart::from_u8(p).is_some_and(BodyPart::is_arm))
+            .map(|(v, _)| (t * nalgebra::Point3::from(*v)).z)
+            .fold(f32::INFINITY, f32::min)
+    };
+    let by_body = bed.lying.bed_from_body(&posed);
+    let by_trunk = bed.lying.bed_from_trunk(&posed);
+    // The hand under the head is the body's lowest point: resting on it holds the back up; resting on the trunk
+    // puts the back on the mattress and the hand into it.
+    assert!(lowest(&by_body, true).abs() < 1e-4);
+    let held_up = lowest(&by_body, false);
+    assert!(held_up > 0.01, "the back {held_up} m above the mattress");
+    assert!(lowest(&by_trunk, false).abs() < 1e-4);
+    assert!((lowest(&by_trunk, true) + held_up).abs() < 1e-4);
+    // Only the height differs.
+    assert_eq!(by_body.rotation, by_trunk.rotation);
+    let d = by_body.translation.vector - by_trunk.translation.vector;
+    assert!(d.x == 0.0 && d.y == 0.0 && (d.z - held_up).abs() < 1e-4, "{d:?}");
+}
+
+#[test]
+fn a_sequence_patient_moves_the_arms_and_keeps_the_trunk_where_it_lies() {
+    use supine_models::body::PosedBody;
+    use supine_models::scene::body::BodySource;
+    let source = supine_models::scene::model_body::ModelBodySource::load(None).expect("default body model");
+    let lowest = |b: &PosedBody<'_>, arms: bool| {
+        b.vertices
+            .iter()
+            .zip(b.part_of_vertex.iter())
+            .filter(|&(_, &p)| BodyPart::from_u8(p).is_some_and(BodyPart::is_arm) == arms)
+            .map(|(v, _)| v[2])
+            .fold(f32::INFINITY, f32::min)
+    };
+    // A patient whose hand goes below the back at one end of the blend (under the head, or beside a raised back).
+    let (a, b) = (0..60)
+        .map(|s| {
+            let at = |t| source.sample_motion(s, s + 100, s + 200, t).expect("sample").body;
+            (at(0.0), at(1.0))
+        })
+        .find(|(a, b)| lowest(a, true).min(lowest(b, true)) < -0.01)
+        .expect("a hand below the back in 60 patients");
+    let arm_moved = a
+        .vertices
+        .iter()
+        .zip(&b.vertices)
+        .zip(a.part_of_vertex.iter())
+        .filter(|&(_, &p)| BodyPart::from_u8(p).is_some_and(BodyPart::is_arm))
+        .map(|((x, y), _)| dist(*x, *y))
+        .fold(0.0f32, f32::max);
+    assert!(
+        arm_moved > 0.1,
+        "the arms blend to other sub-poses: {arm_moved} m"
+    );
+    // The back stays on the mattress and the hips stay put, whatever the hand does.
+    for body in [&a, &b] {
+        assert!(
+            lowest(body, false).abs() < 1e-4,
+            "trunk {} m off the mattress",
+            lowest(body, false)
+        );
+    }
+    for s in [SalientPoint::LeftHip, SalientPoint::RightHip] {
+        assert_eq!(a.salient_points[s as usize], b.salient_points[s as usize]);
+    }
 }

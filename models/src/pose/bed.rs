@@ -18,7 +18,7 @@ use rand::Rng;
 use rand_distr::{Distribution, Normal};
 
 use super::{Pose, RestRig, aim_segment};
-use crate::body::{BodyModel, PosedBody, SalientPoint, Shape};
+use crate::body::{BodyModel, BodyPart, PosedBody, SalientPoint, Shape};
 
 /// Upper-body sub-pose.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize)]
@@ -120,6 +120,21 @@ impl Lying {
 
     /// The rigid transform taking `posed` (body frame) onto the bed frame.
     pub fn bed_from_body(&self, posed: &PosedBody<'_>) -> Isometry3<f32> {
+        self.resting_on(posed, |_| true)
+    }
+
+    /// [`Lying::bed_from_body`] with the body resting on the lowest skin point of its head, trunk and legs, the arms
+    /// left out: a hand under the head, or beside a back on a raised head section, lies lower than the back and
+    /// would hold the torso 2-7 cm off the mattress (and, as the arms move in a sequence, lift and drop it); here
+    /// the hand sinks into the mattress instead.
+    pub fn bed_from_trunk(&self, posed: &PosedBody<'_>) -> Isometry3<f32> {
+        self.resting_on(posed, |part| {
+            !BodyPart::from_u8(part).is_some_and(BodyPart::is_arm)
+        })
+    }
+
+    /// The placement of the module docs, resting on the lowest vertex whose part `rests` accepts.
+    fn resting_on(&self, posed: &PosedBody<'_>, rests: impl Fn(u8) -> bool) -> Isometry3<f32> {
         let r = self.rotation();
         let hl = posed.salient_points[SalientPoint::LeftHip as usize];
         let hr = posed.salient_points[SalientPoint::RightHip as usize];
@@ -131,7 +146,9 @@ impl Lying {
         let min_z = posed
             .vertices
             .iter()
-            .map(|v| (r * Vector3::new(v[0], v[1], v[2])).z)
+            .zip(posed.part_of_vertex.iter())
+            .filter(|&(_, &part)| rests(part))
+            .map(|(v, _)| (r * Vector3::new(v[0], v[1], v[2])).z)
             .fold(f32::INFINITY, f32::min);
         Isometry3::from_parts(
             Translation3::new(-hip.x, -hip.y, -min_z),

@@ -6,7 +6,7 @@
 //! Cost per sample: one LBS of the MakeHuman mesh (~10 ms) and a copy of its triangles.
 
 use super::body::{BodySource, Patient};
-use crate::body::{BodyModel, BodyPart, Shape};
+use crate::body::{BodyModel, BodyPart, PosedBody, Shape};
 use crate::pose::bed::pose_on_bed;
 use crate::pose::{BedPose, BedPoseSampler};
 use anyhow::{Context, Result};
@@ -39,7 +39,17 @@ impl ModelBodySource {
     }
 
     fn on_bed(&self, shape: &Shape, bed: &BedPose, pose_json: serde_json::Value) -> Patient {
-        let posed = pose_on_bed(&self.model, shape, bed);
+        self.placed(pose_on_bed(&self.model, shape, bed), shape, bed, pose_json)
+    }
+
+    /// `posed` (on the body model's bed frame) as a patient on this crate's bed frame.
+    fn placed(
+        &self,
+        posed: PosedBody<'_>,
+        shape: &Shape,
+        bed: &BedPose,
+        pose_json: serde_json::Value,
+    ) -> Patient {
         let body = posed
             .transformed(&nalgebra::Isometry3::translation(0.0, HIP_Y, 0.0))
             .into_owned();
@@ -73,7 +83,8 @@ impl BodySource for ModelBodySource {
     }
 
     /// Pose `a`'s sub-pose combination and lying, blended toward the same combination with other arm sub-poses
-    /// (drawn from `b`): the trunk and legs stay, the arms move.
+    /// (drawn from `b`): the trunk and legs stay where pose `a` rests on its back ([`crate::pose::Lying::bed_from_trunk`]), the
+    /// arms move.
     fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> Result<Patient> {
         let shape = self
             .model
@@ -97,7 +108,11 @@ impl BodySource for ModelBodySource {
             }
         }
         let json = serde_json::json!({ "from_combination": c, "to_combination": other, "t": t, "lying": first.lying, "pose": blended.pose });
-        Ok(self.on_bed(&shape, &blended, json))
+        // The body rests on its back where pose `a` puts it: placed by each blend's lowest vertex, a hand rising from
+        // under the head or beside a raised back would let the patient sink with it (2-4 cm in a second).
+        let bed_from_body = pa.lying.bed_from_trunk(&self.model.pose(&shape, &pa.pose));
+        let posed = self.model.pose(&shape, &blended.pose).transformed(&bed_from_body);
+        Ok(self.placed(posed, &shape, &blended, json))
     }
 
     fn torso_subset(&self) -> Option<Vec<u32>> {
