@@ -110,6 +110,17 @@ fn the_report_has_the_contracts_keys_and_each_stages_latency() {
     assert_eq!(summary["full_occlusions"], 1);
     let recovered = u64::from(ms(one, "/recovery_frames") <= 5.0);
     assert_eq!(summary["recovered_within_target"].as_u64(), Some(recovered));
+    let held = one["tracked_before_occlusion"]
+        .as_bool()
+        .expect("the demo has a full occlusion");
+    assert_eq!(
+        summary["full_occlusions_tracked_before"].as_u64(),
+        Some(u64::from(held))
+    );
+    assert_eq!(
+        summary["recovered_within_target_tracked_before"].as_u64(),
+        Some(if held { recovered } else { 0 })
+    );
     // The demo's patient neither rolls nor shifts: no motion to follow, counted as none.
     assert!(one["motion"].is_null());
     for kind in ["roll", "shift"] {

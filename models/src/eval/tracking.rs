@@ -12,7 +12,9 @@
 //!   is the tracked pose's.
 //! - Sequences without `torso.bin` (the committed demo, older ones) are scored as `supine_core::tracker::accuracy`
 //!   does: vertex to vertex against the body model shaped with the true coefficients at the true torso pose.
-//! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm.
+//! - recovery: frames from the end of the full occlusion to the first frame tracked within 20 mm; counted also over
+//!   the sequences tracked within 20 mm as the arm began its approach (`tracked_before_occlusion`), since a track
+//!   already off before it has no pose to recover.
 //! - motion followed: the torso error's median over the [`MOTION_WINDOW`] frames after the patient's roll or shift
 //!   ends is at most [`MOTION_FOLLOWED_MM`] above its median over the frames before it began (not counted without a
 //!   pose before it; not followed without one after it).
@@ -660,6 +662,7 @@ pub fn run_variant(
     };
     let occlusion = full.as_ref().and_then(|f| f.episodes().full_occlusion.as_ref());
     let recovery = occlusion.map(|o| recovery_frames(o.end, &scores));
+    let held = occlusion.map(|o| tracked_before(o, &scores));
     let motion = full
         .as_ref()
         .and_then(|f| f.episodes().motion.as_ref())
@@ -681,6 +684,9 @@ pub fn run_variant(
             s.probe_true_distance_mm.filter(|d| d.abs() <= CONTACT_MM).and(s.probe_mm)
         })),
         "recovery_frames": recovery,
+        // Whether the track was within the recovery's 20 mm as the arm began its approach: a track already off
+        // has nothing to recover to, and its recovery counts a different failure.
+        "tracked_before_occlusion": held,
         "motion": motion,
         // The issue's condition on the sequence: the most of the torso the sensor loses on a frame of the arm's
         // sweep (the full occlusion's approach, park and way back left out); null without the per-frame truth.
@@ -816,13 +822,32 @@ fn oracle_fit(
     }))
 }
 
+/// The torso surface error under which a frame counts as tracked again after the full occlusion, mm.
+const RECOVERED_MM: f32 = 20.0;
+
+/// Whether at least half of the [`MOTION_WINDOW`] frames before the arm's approach to the full occlusion had a pose
+/// within [`RECOVERED_MM`].
+fn tracked_before(o: &FullOcclusion, scores: &[FrameScore]) -> bool {
+    let window = || {
+        scores
+            .iter()
+            .take(o.approach_start as usize)
+            .skip(o.approach_start.saturating_sub(MOTION_WINDOW) as usize)
+    };
+    let within = window()
+        .filter(|s| s.torso_mm.is_some_and(|e| e < RECOVERED_MM))
+        .count();
+    let n = window().count();
+    n > 0 && 2 * within >= n
+}
+
 /// Frames from the end of the full-occlusion episode (the first unparked frame) to the first frame tracked again
 /// (a state with a pose and a torso surface error under 20 mm); the frames left when it never recovers.
 fn recovery_frames(end: u32, scores: &[FrameScore]) -> u32 {
     scores
         .iter()
         .skip(end as usize)
-        .position(|s| s.torso_mm.is_some_and(|e| e < 20.0))
+        .position(|s| s.torso_mm.is_some_and(|e| e < RECOVERED_MM))
         .map(|p| p as u32)
         .unwrap_or(scores.len().saturating_sub(end as usize) as u32)
 }
@@ -916,6 +941,12 @@ fn combine(summaries: &[Value], frame_ms: &mut [f32]) -> Value {
         .iter()
         .filter_map(|s| s["recovery_frames"].as_u64())
         .collect();
+    let held_recoveries: Vec<u64> = summaries
+        .iter()
+        .filter(|s| s["tracked_before_occlusion"] == json!(true))
+        .filter_map(|s| s["recovery_frames"].as_u64())
+        .collect();
+    let within_target = |r: &[u64]| r.iter().filter(|&&r| r <= RECOVERY_TARGET_FRAMES as u64).count();
     let mut states = serde_json::Map::new();
     for s in summaries {
         if let Some(m) = s["states"].as_object() {
@@ -936,8 +967,11 @@ fn combine(summaries: &[Value], frame_ms: &mut [f32]) -> Value {
         "probe_error_mm_mean_contact": num("probe_error_mm_mean_contact"),
         "recovery_frames": max("recovery_frames"),
         // How many of the sequences with a full occlusion met the issue's recovery target, and how many had one.
-        "recovered_within_target": recoveries.iter().filter(|&&r| r <= RECOVERY_TARGET_FRAMES as u64).count(),
+        "recovered_within_target": within_target(&recoveries),
         "full_occlusions": recoveries.len(),
+        // The same of the sequences tracked within 20 mm as the arm began its approach (`tracked_before_occlusion`).
+        "recovered_within_target_tracked_before": within_target(&held_recoveries),
+        "full_occlusions_tracked_before": held_recoveries.len(),
         "motions_followed": motions_followed(summaries),
         "states": states,
         "latency_ms_p50": num("latency_ms_p50"),
@@ -1054,8 +1088,8 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
         let r = &report[variant.name()];
         println!(
             "{:<20} tracked {:.3}  torso {:>6.1} mm (rigid floor {:.1} mm)  points {:>6.1} mm  probe {:>6.1} mm \
-             ({:.1} mm distance, {:.1} mm in contact range)  recovery <= {} frames on {} of {}  \
-             frames p50 {:.2} ms  p99 {:.2} ms",
+             ({:.1} mm distance, {:.1} mm in contact range)  recovery <= {} frames on {} of {} \
+             ({} of the {} tracked before it)  frames p50 {:.2} ms  p99 {:.2} ms",
             variant.name(),
             r["tracked_fraction"].as_f64().unwrap_or(0.0),
             r["torso_surface_error_mm_mean"].as_f64().unwrap_or(f64::NAN),
@@ -1067,6 +1101,8 @@ fn evaluate(args: &TrackingEvalArgs) -> Result<()> {
             RECOVERY_TARGET_FRAMES,
             r["recovered_within_target"],
             r["full_occlusions"],
+            r["recovered_within_target_tracked_before"],
+            r["full_occlusions_tracked_before"],
             r["latency_ms_p50_pooled"].as_f64().unwrap_or(f64::NAN),
             r["latency_ms_p99_pooled"].as_f64().unwrap_or(f64::NAN),
         );
@@ -1234,5 +1270,53 @@ mod tests {
         let counts = motions_followed(&summaries);
         assert_eq!(counts["roll"], json!({"followed": 1, "of": 2}));
         assert_eq!(counts["shift"], json!({"followed": 0, "of": 0}));
+    }
+
+    #[test]
+    fn a_recovery_is_counted_apart_for_the_tracks_within_20_mm_as_the_approach_began() {
+        let park = FullOcclusion {
+            start: 30,
+            end: 40,
+            approach_start: 20,
+            leave_end: 45,
+            park_distance_m: 0.7,
+            planned_torso_occluded_fraction: 0.95,
+            torso_occluded_fraction_min: 0.95,
+        };
+        // The ten frames before the approach: half of them within 20 mm is tracked, fewer is not; frames without
+        // a pose count as off.
+        let before = |within: usize| {
+            let mut e = vec![Some(50.0); 10];
+            for x in e.iter_mut().take(within) {
+                *x = Some(5.0);
+            }
+            e[9] = if within == 10 { Some(5.0) } else { None };
+            let mut v = vec![Some(5.0); 10];
+            v.extend(e);
+            v.extend([Some(5.0); 30]);
+            tracked_before(&park, &with_errors(&v))
+        };
+        assert!(before(10));
+        assert!(before(5));
+        assert!(!before(4));
+        assert!(!before(0));
+        // Pooled: of two recoveries within the target one was tracked before; the one that was not, and a late one
+        // that was, count in their own totals.
+        let seq = |rec: u64, held: bool| json!({"recovery_frames": rec, "tracked_before_occlusion": held, "frames": 1});
+        let c = combine(&[seq(0, true), seq(2, false), seq(9, true)], &mut [1.0]);
+        assert_eq!(
+            (
+                c["recovered_within_target"].as_u64(),
+                c["full_occlusions"].as_u64()
+            ),
+            (Some(2), Some(3))
+        );
+        assert_eq!(
+            (
+                c["recovered_within_target_tracked_before"].as_u64(),
+                c["full_occlusions_tracked_before"].as_u64()
+            ),
+            (Some(1), Some(2))
+        );
     }
 }
