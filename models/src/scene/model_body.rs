@@ -3,7 +3,8 @@
 //! variation), LBS, then the body model's bed frame (hips at the origin) shifted onto this crate's bed frame
 //! (origin at the mattress centre).
 //!
-//! Cost per sample: one LBS of the MakeHuman mesh (~10 ms) and a copy of its triangles.
+//! Cost per sample: one LBS of the MakeHuman mesh (~10 ms) and a copy of its triangles; a sequence frame
+//! (`sample_motion`) poses pose `a` too, to place the body.
 
 use super::body::{BodySource, Patient};
 use crate::body::{BodyModel, BodyPart, PosedBody, Shape};
@@ -83,8 +84,8 @@ impl BodySource for ModelBodySource {
     }
 
     /// Pose `a`'s sub-pose combination and lying, blended toward the same combination with other arm sub-poses
-    /// (drawn from `b`): the trunk and legs stay where pose `a` rests on its back ([`crate::pose::Lying::bed_from_trunk`]), the
-    /// arms move.
+    /// (drawn from `b`): the trunk and legs stay where pose `a` rests on its back
+    /// ([`crate::pose::Lying::bed_from_trunk`]), the arms move.
     fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> Result<Patient> {
         let shape = self
             .model
