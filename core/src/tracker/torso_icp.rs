@@ -131,7 +131,9 @@ pub struct TorsoIcpConfig {
     /// off in pitch that then coasted as occluded). The temporal fit goes without it: there it turned good tracks
     /// (validation s5005: 12 -> 49 mm). Off (0) by default: at 3 it cut the validation torso error (14.0 -> 11.8 mm
     /// mean), but on the fresh held-out 13001-13024 it made two good tracks wrong locks (one flipped end to end
-    /// during the full occlusion) and refused two wrong ones (`docs/tracking.md`).
+    /// during the full occlusion) and refused two wrong ones (`docs/tracking.md`). Measured again once every
+    /// sequence's patient lay with the back on the mattress (83a1d85; choice set 73021-73220): 3 took the torso
+    /// error from 8.53 to 9.94 mm and the tracked share from 99.17 to 97.57 % (forty-first round).
     pub bed_pitch_weight: f32,
     /// How far the shoulder half's lowest point lies above the hip half's on a lying patient, metres (negative:
     /// below; the torso frame from the salient points is not parallel to the back). On the validation sequences
