@@ -4,17 +4,19 @@
 //! (origin at the mattress centre).
 //!
 //! Cost per sample: one LBS of the MakeHuman mesh (~10 ms) and a copy of its triangles; a sequence frame
-//! (`sample_motion`) poses pose `a` too, to place the body.
+//! (`sample_motion`) poses pose `a` too, to place the body, once per patient.
 
 use super::body::{BodySource, Patient};
 use crate::body::{BodyModel, BodyPart, PosedBody, Shape};
 use crate::pose::bed::pose_on_bed;
 use crate::pose::{BedPose, BedPoseSampler};
 use anyhow::{Context, Result};
+use nalgebra::Isometry3;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_chacha::rand_core::SeedableRng;
 use std::path::Path;
+use std::sync::{Mutex, PoisonError};
 
 /// Bed-frame y of the hip joints (and so of the head-section hinge, which the body model puts through the hips).
 pub const HIP_Y: f32 = 0.0;
@@ -23,7 +25,13 @@ pub const HIP_Y: f32 = 0.0;
 pub struct ModelBodySource {
     model: BodyModel,
     sampler: BedPoseSampler,
+    /// `sample_motion`'s placement of its last patient, keyed by (shape seed, pose seed `a`): a sequence asks for
+    /// the same patient on every frame, and the placement costs an LBS of pose `a` of its own.
+    placement: Mutex<Option<Placement>>,
 }
+
+/// A patient's (shape seed, pose seed) and where its pose lies on the bed.
+type Placement = ((u64, u64), Isometry3<f32>);
 
 impl ModelBodySource {
     /// Load the body model from `path`, or the committed default artifact.
@@ -36,11 +44,8 @@ impl ModelBodySource {
         Ok(ModelBodySource {
             sampler: BedPoseSampler::new(&model),
             model,
+            placement: Mutex::new(None),
         })
-    }
-
-    fn on_bed(&self, shape: &Shape, bed: &BedPose, pose_json: serde_json::Value) -> Patient {
-        self.placed(pose_on_bed(&self.model, shape, bed), shape, bed, pose_json)
     }
 
     /// `posed` (on the body model's bed frame) as a patient on this crate's bed frame.
@@ -52,7 +57,7 @@ impl ModelBodySource {
         pose_json: serde_json::Value,
     ) -> Patient {
         let body = posed
-            .transformed(&nalgebra::Isometry3::translation(0.0, HIP_Y, 0.0))
+            .transformed(&Isometry3::translation(0.0, HIP_Y, 0.0))
             .into_owned();
         Patient {
             body,
@@ -80,7 +85,7 @@ impl BodySource for ModelBodySource {
         let shape = self.model.sample_shape(rng);
         let bed = self.sampler.sample(rng);
         let json = serde_json::to_value(&bed)?;
-        Ok(self.on_bed(&shape, &bed, json))
+        Ok(self.placed(pose_on_bed(&self.model, &shape, &bed), &shape, &bed, json))
     }
 
     /// Pose `a`'s sub-pose combination and lying, blended toward the same combination with other arm sub-poses
@@ -111,7 +116,16 @@ impl BodySource for ModelBodySource {
         let json = serde_json::json!({ "from_combination": c, "to_combination": other, "t": t, "lying": first.lying, "pose": blended.pose });
         // The body rests on its back where pose `a` puts it: placed by each blend's lowest vertex, a hand rising from
         // under the head or beside a raised back would let the patient sink with it (2-4 cm in a second).
-        let bed_from_body = pa.lying.bed_from_trunk(&self.model.pose(&shape, &pa.pose));
+        let key = (shape_seed, a);
+        let known = *self.placement.lock().unwrap_or_else(PoisonError::into_inner);
+        let bed_from_body = match known {
+            Some((k, placement)) if k == key => placement,
+            _ => {
+                let placement = pa.lying.bed_from_trunk(&self.model.pose(&shape, &pa.pose));
+                *self.placement.lock().unwrap_or_else(PoisonError::into_inner) = Some((key, placement));
+                placement
+            }
+        };
         let posed = self.model.pose(&shape, &blended.pose).transformed(&bed_from_body);
         Ok(self.placed(posed, &shape, &blended, json))
     }
