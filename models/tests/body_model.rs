@@ -9,7 +9,7 @@ use supine_core::salient::SalientPoint;
 use supine_models::body::file::{BodyFileData, quantise_basis, write_body_model};
 use supine_models::body::{BodyModel, COMPONENTS, PopulationMember, Shape};
 use supine_models::pose::bed::{COMBINATIONS, pose_on_bed};
-use supine_models::pose::{BedPoseSampler, Lying, Pose};
+use supine_models::pose::{BedPoseSampler, Lying, Pose, Rest};
 
 fn model() -> BodyModel {
     BodyModel::load_default().expect("committed artifact loads")
@@ -318,7 +318,7 @@ fn bed_poses_cover_750_combinations_and_are_deterministic() {
     assert_eq!(a, draw(42));
     assert_ne!(a, draw(43));
     for (shape, bed) in &a {
-        let on_bed = pose_on_bed(&m, shape, bed);
+        let on_bed = pose_on_bed(&m, shape, bed, Rest::LowestPoint);
         assert!(on_bed.vertices.iter().all(|v| v.iter().all(|c| c.is_finite())));
         let (lo, hi) = on_bed.bounds();
         assert!(lo[2].abs() < 1e-4, "lowest point on the mattress: {lo:?}");
@@ -340,7 +340,7 @@ fn canonical_sub_poses_do_what_they_say() {
             .unwrap()
     };
     let flat = Lying::SUPINE;
-    let posed = |i| pose_on_bed(&m, &Shape::MEAN, &sampler.canonical(i, flat));
+    let posed = |i| pose_on_bed(&m, &Shape::MEAN, &sampler.canonical(i, flat), Rest::Trunk);
     let wrist = |p: &supine_models::body::PosedBody<'_>, side: &str| {
         p.joints[m.joint_index(&format!("joint-{side}-hand")).unwrap()]
     };
@@ -382,6 +382,7 @@ fn canonical_sub_poses_do_what_they_say() {
         &m,
         &Shape::MEAN,
         &sampler.canonical(find("(Neutral, AtSide, AtSide, Straight)"), raise),
+        Rest::Trunk,
     );
     let flat_head = neutral.salient_points[SalientPoint::Head as usize][2];
     assert!(up.salient_points[SalientPoint::Head as usize][2] > flat_head + 0.2);
@@ -426,6 +427,8 @@ fn a_hand_under_the_head_does_not_hold_the_back_off_the_mattress() {
     };
     let by_body = bed.lying.bed_from_body(&posed);
     let by_trunk = bed.lying.bed_from_trunk(&posed);
+    assert_eq!(bed.lying.bed_from(&posed, Rest::LowestPoint), by_body);
+    assert_eq!(bed.lying.bed_from(&posed, Rest::Trunk), by_trunk);
     // The hand under the head is the body's lowest point: resting on it holds the back up; resting on the trunk
     // puts the back on the mattress and the hand into it.
     assert!(lowest(&by_body, true).abs() < 1e-4);

@@ -65,6 +65,11 @@ pub struct DatasetArgs {
     /// torso or lifted off it toward the head).
     #[arg(long, value_enum, default_value_t = super::ArmPlacement::Contact)]
     pub arm_placement: super::ArmPlacement,
+    /// What the patient rests on: `lowest-point` (the lowest skin point, hands included: about one patient in nine
+    /// then lies on a hand, the torso 2-5 cm above the mattress; the committed models' data) or `trunk` (the back,
+    /// as the tracking sequences lay their patients since 2026-12-07; a hand under the body sinks into the mattress).
+    #[arg(long, value_enum, default_value_t = crate::pose::Rest::LowestPoint)]
+    pub rest: crate::pose::Rest,
     /// Replace an existing dataset in DIR.
     #[arg(long)]
     pub force: bool,
@@ -158,6 +163,7 @@ fn run_inner(args: &DatasetArgs) -> anyhow::Result<()> {
         view_distance_scale: args.view_distance_scale,
         crop_margin_px: args.crop_margin,
         arm_placement: args.arm_placement,
+        rest: args.rest,
     };
     let total = args.bodies as u64 * args.views as u64;
     let bar = ProgressBar::with_draw_target(Some(total), ProgressDrawTarget::stderr());

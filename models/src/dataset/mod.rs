@@ -20,6 +20,7 @@ pub mod cli;
 pub mod format;
 pub mod preview;
 
+use crate::pose::Rest;
 use crate::render::noise::{KinectNoise, NoiseScratch, Rect};
 use crate::render::{Label, Renderer};
 use crate::scene::arm::ArmState;
@@ -80,6 +81,9 @@ pub struct DatasetConfig {
     /// Where the views that show the arm place it ([`ArmPlacement::Contact`] when absent).
     #[serde(default, skip_serializing_if = "ArmPlacement::is_contact")]
     pub arm_placement: ArmPlacement,
+    /// What the patient rests on ([`Rest::LowestPoint`] when absent: every dataset before this option).
+    #[serde(default, skip_serializing_if = "Rest::is_lowest_point")]
+    pub rest: Rest,
 }
 
 /// Where a dataset view's robot arm is.
@@ -116,6 +120,7 @@ impl Default for DatasetConfig {
             view_distance_scale: 1.0,
             crop_margin_px: CROP_MARGIN_PX,
             arm_placement: ArmPlacement::Contact,
+            rest: Rest::LowestPoint,
         }
     }
 }
@@ -429,7 +434,7 @@ pub fn generate_body(
 ) -> Result<()> {
     let mut rng = ChaCha8Rng::seed_from_u64(mix_seed(cfg.seed, index as u64));
     let body: Patient = source
-        .sample(&mut rng)
+        .sample(&mut rng, cfg.rest)
         .with_context(|| format!("sampling body {index}"))?;
     let bed = BedParams::sample(&mut rng, body.head_raise_rad, body.hinge_y_m);
     let mut scene = Scene::new(&body.body, bed);
@@ -851,6 +856,38 @@ mod tests {
                 assert!(parts.len() >= 5, "several body parts visible: {parts:?}");
             }
         }
+        std::fs::remove_dir_all(&base).ok();
+    }
+
+    #[test]
+    fn a_trunk_rest_moves_only_the_patients_lying_on_a_hand_and_is_recorded() {
+        let source =
+            crate::scene::model_body::ModelBodySource::load(None).expect("committed body model artifact");
+        let base = std::env::temp_dir().join(format!("supine-dataset-rest-{}", std::process::id()));
+        let cfg = DatasetConfig {
+            bodies: 9,
+            views: 1,
+            previews: 0,
+            ..tiny(2)
+        };
+        let trunk = DatasetConfig {
+            rest: Rest::Trunk,
+            ..cfg.clone()
+        };
+        generate(&source, &cfg, &base.join("low"), &|| {}).unwrap();
+        generate(&source, &trunk, &base.join("trunk"), &|| {}).unwrap();
+        let body = |dir: &str, i| std::fs::read(body_file(&base.join(dir), i)).unwrap();
+        let moved = (0..cfg.bodies)
+            .filter(|&i| body("low", i) != body("trunk", i))
+            .count();
+        // About one patient in nine lies on a hand; the others rest on the back either way.
+        assert!((1..cfg.bodies as usize).contains(&moved), "{moved} of 9 moved");
+        let manifest = |dir: &str| std::fs::read_to_string(base.join(dir).join("dataset.json")).unwrap();
+        assert!(manifest("trunk").contains("\"rest\": \"trunk\""));
+        // Datasets from before the option have no `rest`: they read as the lowest point they were made with.
+        assert!(!manifest("low").contains("\"rest\""));
+        let old: Manifest = serde_json::from_str(&manifest("low")).unwrap();
+        assert_eq!(old.config.rest, Rest::LowestPoint);
         std::fs::remove_dir_all(&base).ok();
     }
 

@@ -93,6 +93,28 @@ const LEGS: [LegPose; 5] = [
 /// Number of sub-pose combinations.
 pub const COMBINATIONS: usize = TRUNKS.len() * ARMS.len() * ARMS.len() * LEGS.len();
 
+/// What a lying body rests on: where the bed's mattress meets it.
+#[derive(
+    Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize, clap::ValueEnum,
+)]
+#[serde(rename_all = "snake_case")]
+pub enum Rest {
+    /// The lowest skin point of the head, trunk and legs ([`Lying::bed_from_trunk`]): a hand under the head or
+    /// beside the back sinks into the mattress.
+    Trunk,
+    /// The lowest skin point of the whole body, hands included ([`Lying::bed_from_body`]): about one patient in
+    /// nine then lies on a hand, the torso 2-5 cm above the mattress (every dataset before this option).
+    #[default]
+    LowestPoint,
+}
+
+impl Rest {
+    /// Whether this is the placement of the datasets before the option.
+    pub fn is_lowest_point(&self) -> bool {
+        *self == Rest::LowestPoint
+    }
+}
+
 /// Rigid lying variation (see the module docs).
 #[derive(Clone, Copy, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Lying {
@@ -121,6 +143,14 @@ impl Lying {
     /// The rigid transform taking `posed` (body frame) onto the bed frame.
     pub fn bed_from_body(&self, posed: &PosedBody<'_>) -> Isometry3<f32> {
         self.resting_on(posed, |_| true)
+    }
+
+    /// [`Lying::bed_from_trunk`] or [`Lying::bed_from_body`], as `rest` says.
+    pub fn bed_from(&self, posed: &PosedBody<'_>, rest: Rest) -> Isometry3<f32> {
+        match rest {
+            Rest::Trunk => self.bed_from_trunk(posed),
+            Rest::LowestPoint => self.bed_from_body(posed),
+        }
     }
 
     /// [`Lying::bed_from_body`] with the body resting on the lowest skin point of its head, trunk and legs, the arms
@@ -451,9 +481,10 @@ impl BedPoseSampler {
     }
 }
 
-/// Posed bodies are in the body frame; this helper poses and places one on the bed in a single call.
-pub fn pose_on_bed<'m>(model: &'m BodyModel, shape: &Shape, bed: &BedPose) -> PosedBody<'m> {
+/// Posed bodies are in the body frame; this helper poses and places one on the bed, resting on `rest`, in a
+/// single call.
+pub fn pose_on_bed<'m>(model: &'m BodyModel, shape: &Shape, bed: &BedPose, rest: Rest) -> PosedBody<'m> {
     let posed = model.pose(shape, &bed.pose);
-    let t = bed.lying.bed_from_body(&posed);
+    let t = bed.lying.bed_from(&posed, rest);
     posed.transformed(&t)
 }

@@ -18,7 +18,7 @@
 
 pub mod bed;
 
-pub use bed::{ArmPose, BedPose, BedPoseSampler, LegPose, Lying, TrunkPose};
+pub use bed::{ArmPose, BedPose, BedPoseSampler, LegPose, Lying, Rest, TrunkPose};
 
 use nalgebra::{Isometry3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use supine_core::salient::SalientPoint;

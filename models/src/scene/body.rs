@@ -9,6 +9,7 @@ use std::borrow::Cow;
 
 use super::shapes::TriMesh;
 use crate::body::PosedBody;
+use crate::pose::Rest;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -39,8 +40,9 @@ pub trait BodySource: Sync {
     fn name(&self) -> String;
     /// Body-part names indexed by the part ids of [`PosedBody::part_of_vertex`].
     fn part_names(&self) -> Vec<String>;
-    /// A random body (shape from the population, pose from the bed-pose distribution), deterministic for `rng`.
-    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<Patient>;
+    /// A random body (shape from the population, pose from the bed-pose distribution), deterministic for `rng`,
+    /// resting on `rest` (sources with a placement of their own, the mannequin's, ignore it).
+    fn sample(&self, rng: &mut ChaCha8Rng, rest: Rest) -> anyhow::Result<Patient>;
     /// The body with `shape` fixed and the pose blended between two sampled poses (`t` in 0..1), for slow motion in
     /// sequences: `a` and `b` are pose seeds. Sources that cannot interpolate return the `a` pose.
     fn sample_motion(&self, shape_seed: u64, a: u64, b: u64, t: f32) -> anyhow::Result<Patient>;
@@ -263,7 +265,7 @@ impl BodySource for Mannequin {
         MANNEQUIN_PARTS.iter().map(|s| s.to_string()).collect()
     }
 
-    fn sample(&self, rng: &mut ChaCha8Rng) -> anyhow::Result<Patient> {
+    fn sample(&self, rng: &mut ChaCha8Rng, _rest: Rest) -> anyhow::Result<Patient> {
         Ok(Mannequin::build(&Mannequin::sample_params(rng)))
     }
 

@@ -9,7 +9,7 @@
 use super::body::{BodySource, Patient};
 use crate::body::{BodyModel, BodyPart, PosedBody, Shape};
 use crate::pose::bed::pose_on_bed;
-use crate::pose::{BedPose, BedPoseSampler};
+use crate::pose::{BedPose, BedPoseSampler, Rest};
 use anyhow::{Context, Result};
 use nalgebra::Isometry3;
 use rand::Rng;
@@ -81,11 +81,11 @@ impl BodySource for ModelBodySource {
             .collect()
     }
 
-    fn sample(&self, rng: &mut ChaCha8Rng) -> Result<Patient> {
+    fn sample(&self, rng: &mut ChaCha8Rng, rest: Rest) -> Result<Patient> {
         let shape = self.model.sample_shape(rng);
         let bed = self.sampler.sample(rng);
         let json = serde_json::to_value(&bed)?;
-        Ok(self.placed(pose_on_bed(&self.model, &shape, &bed), &shape, &bed, json))
+        Ok(self.placed(pose_on_bed(&self.model, &shape, &bed, rest), &shape, &bed, json))
     }
 
     /// Pose `a`'s sub-pose combination and lying, blended toward the same combination with other arm sub-poses
