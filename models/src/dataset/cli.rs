@@ -65,9 +65,10 @@ pub struct DatasetArgs {
     /// torso or lifted off it toward the head).
     #[arg(long, value_enum, default_value_t = super::ArmPlacement::Contact)]
     pub arm_placement: super::ArmPlacement,
-    /// What the patient rests on: `lowest-point` (the lowest skin point, hands included: about one patient in nine
-    /// then lies on a hand, the torso 2-5 cm above the mattress; the committed models' data) or `trunk` (the back,
-    /// as the tracking sequences lay their patients since 2026-12-07; a hand under the body sinks into the mattress).
+    /// What the patient rests on: `lowest-point` (the lowest skin point, hands included: one patient in seven to nine
+    /// then lies on a hand, the torso 2-5 cm above the mattress; the committed shape model's data) or `trunk` (the
+    /// back, as the tracking sequences lay their patients and the default joint forest was trained since 2026-12-07;
+    /// a hand under the body sinks into the mattress).
     #[arg(long, value_enum, default_value_t = crate::pose::Rest::LowestPoint)]
     pub rest: crate::pose::Rest,
     /// Replace an existing dataset in DIR.

@@ -880,7 +880,7 @@ mod tests {
         let moved = (0..cfg.bodies)
             .filter(|&i| body("low", i) != body("trunk", i))
             .count();
-        // About one patient in nine lies on a hand; the others rest on the back either way.
+        // One patient in seven to nine lies on a hand; the others rest on the back either way.
         assert!((1..cfg.bodies as usize).contains(&moved), "{moved} of 9 moved");
         let manifest = |dir: &str| std::fs::read_to_string(base.join(dir).join("dataset.json")).unwrap();
         assert!(manifest("trunk").contains("\"rest\": \"trunk\""));

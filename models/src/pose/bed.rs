@@ -102,7 +102,7 @@ pub enum Rest {
     /// The lowest skin point of the head, trunk and legs ([`Lying::bed_from_trunk`]): a hand under the head or
     /// beside the back sinks into the mattress.
     Trunk,
-    /// The lowest skin point of the whole body, hands included ([`Lying::bed_from_body`]): about one patient in
+    /// The lowest skin point of the whole body, hands included ([`Lying::bed_from_body`]): one patient in seven to
     /// nine then lies on a hand, the torso 2-5 cm above the mattress (every dataset before this option).
     #[default]
     LowestPoint,
