@@ -828,16 +828,16 @@ const RECOVERED_MM: f32 = 20.0;
 /// Whether at least half of the [`MOTION_WINDOW`] frames before the arm's approach to the full occlusion had a pose
 /// within [`RECOVERED_MM`].
 fn tracked_before(o: &FullOcclusion, scores: &[FrameScore]) -> bool {
-    let window = || {
-        scores
-            .iter()
-            .take(o.approach_start as usize)
-            .skip(o.approach_start.saturating_sub(MOTION_WINDOW) as usize)
-    };
-    let within = window()
-        .filter(|s| s.torso_mm.is_some_and(|e| e < RECOVERED_MM))
-        .count();
-    let n = window().count();
+    let (within, n) = scores
+        .iter()
+        .take(o.approach_start as usize)
+        .skip(o.approach_start.saturating_sub(MOTION_WINDOW) as usize)
+        .fold((0, 0), |(within, n), s| {
+            (
+                within + usize::from(s.torso_mm.is_some_and(|e| e < RECOVERED_MM)),
+                n + 1,
+            )
+        });
     n > 0 && 2 * within >= n
 }
 

@@ -109,8 +109,8 @@ pub enum Rest {
 }
 
 impl Rest {
-    /// Whether this is the placement of the datasets before the option.
-    pub fn is_lowest_point(&self) -> bool {
+    /// Whether this is the placement of the datasets before the option (the manifest then leaves `rest` out).
+    pub(crate) fn is_lowest_point(&self) -> bool {
         *self == Rest::LowestPoint
     }
 }
