@@ -145,13 +145,60 @@ pub fn initial_pose(
     observed: &[Point3; SalientPoint::COUNT],
     mattress_up: &Vector3,
 ) -> Result<Isometry3, DegenerateFrame> {
-    let s = raw(body, z);
-    let m = body.salient_points(&s).map(Vector3::from);
-    let hip = (m[SalientPoint::LeftHip.index()] + m[SalientPoint::RightHip.index()]) * 0.5;
-    let sh = (m[SalientPoint::LeftShoulder.index()] + m[SalientPoint::RightShoulder.index()]) * 0.5;
+    let (hip, sh) = hip_and_shoulder_centres(body, z);
     let model_from_frame = canonical::frame_from_axes(hip, sh - hip, -Vector3::y())?;
     let camera_from_frame = canonical::body_frame(observed, mattress_up)?;
     Ok(camera_from_frame * model_from_frame.inverse())
+}
+
+/// The hip centre and the shoulder centre of the model shaped `z` (σ units), model frame.
+fn hip_and_shoulder_centres(body: &BodyModelView<'_>, z: &[f32; SHAPE_COMPONENTS]) -> (Vector3, Vector3) {
+    let m = body.salient_points(&raw(body, z)).map(Vector3::from);
+    let hip = (m[SalientPoint::LeftHip.index()] + m[SalientPoint::RightHip.index()]) * 0.5;
+    let sh = (m[SalientPoint::LeftShoulder.index()] + m[SalientPoint::RightShoulder.index()]) * 0.5;
+    (hip, sh)
+}
+
+/// Offsets along the model's long axis (hip centre to shoulder centre) that [`fit_shape_along_axis`] starts from,
+/// metres. The joint forest's points, 5 cm off, move the start mostly along the body, where the torso's front, close
+/// to a cylinder along it, holds a rigid fit least, and the shape steps take up the shift. Seven starts 3 cm apart,
+/// chosen on the validation bodies with the forest's points: combined 10.01 -> 9.60 mm (three 5 cm apart 9.66, five
+/// 4 or 5 cm apart 9.66, seven 5 cm apart 9.77; docs/shape-eval.md, round 13).
+pub const AXIS_STARTS_M: [f32; 7] = [-0.09, -0.06, -0.03, 0.0, 0.03, 0.06, 0.09];
+
+/// [`fit_shape`] from `camera_from_model` moved along the model's long axis by each of `offsets_m` (none: from
+/// `camera_from_model` alone), keeping the fit with the lowest RMS residual (the earlier one when tied); the last
+/// start's error when none succeeds. Cost: one fit per offset.
+#[allow(clippy::too_many_arguments)] // as fit_shape, plus the offsets
+pub fn fit_shape_along_axis(
+    body: &BodyModelView<'_>,
+    frame: &DepthFrame<'_>,
+    k: &Intrinsics,
+    z0: &[f32; SHAPE_COMPONENTS],
+    camera_from_model: Isometry3,
+    offsets_m: &[f32],
+    params: &FitParams,
+    points: &mut [[f32; 3]],
+    normals: &mut [[f32; 3]],
+) -> Result<FitResult, FitError> {
+    let (hip, sh) = hip_and_shoulder_centres(body, z0);
+    let axis = camera_from_model.rotation * (sh - hip).try_normalize(1e-6).unwrap_or_else(Vector3::y);
+    let mut best: Option<FitResult> = None;
+    let mut last = None;
+    for &d in if offsets_m.is_empty() {
+        &[0.0][..]
+    } else {
+        offsets_m
+    } {
+        let mut start = camera_from_model;
+        start.translation.vector += axis * d;
+        match fit_shape(body, frame, k, z0, start, params, points, normals) {
+            Ok(r) if best.is_none_or(|b| r.association.rms_m() < b.association.rms_m()) => best = Some(r),
+            Ok(_) => {}
+            Err(e) => last = Some(e),
+        }
+    }
+    best.ok_or(last.unwrap_or(FitError::Singular))
 }
 
 /// Area-weighted outward vertex normals of the shaped torso subset (from its triangles), normalised.

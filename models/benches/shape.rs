@@ -5,7 +5,7 @@
 use criterion::{Criterion, criterion_main};
 use std::hint::black_box;
 use supine_core::depth::DepthFrame;
-use supine_core::fit::{FitParams, fit_shape, initial_pose};
+use supine_core::fit::{AXIS_STARTS_M, FitParams, fit_shape, fit_shape_along_axis, initial_pose};
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
 use supine_core::time::Timestamp;
@@ -52,6 +52,24 @@ fn bench(c: &mut Criterion) {
                     &k,
                     &est.shape,
                     pose,
+                    &params,
+                    &mut points,
+                    &mut normals,
+                )
+                .ok(),
+            )
+        })
+    });
+    c.bench_function("shape/combined_along_axis", |b| {
+        b.iter(|| {
+            black_box(
+                fit_shape_along_axis(
+                    &body,
+                    &frame,
+                    &k,
+                    &est.shape,
+                    pose,
+                    &AXIS_STARTS_M,
                     &params,
                     &mut points,
                     &mut normals,

@@ -4,7 +4,9 @@
 
 use supine_core::body_model::BodyPart;
 use supine_core::depth::DepthFrame;
-use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
+use supine_core::fit::{
+    AXIS_STARTS_M, BedContact, FitParams, fit_shape_along_axis, fit_shape_on_bed, initial_pose,
+};
 use supine_core::geometry::Point3;
 use supine_core::icp::IcpParams;
 use supine_core::shape::ShapeModelView;
@@ -54,12 +56,14 @@ fn the_shape_path_allocates_nothing_per_frame() {
             let est = shape.estimate(&frame, &k, &f.noisy_points, &f.mattress, &mut canonical);
             est.ok().and_then(|e| {
                 let pose = initial_pose(&body, &e.shape, &f.noisy_points, &f.mattress.normal()).ok()?;
-                fit_shape(
+                // The combined fit as `eval shape` runs it: from each start along the body.
+                fit_shape_along_axis(
                     &body,
                     &frame,
                     &k,
                     &e.shape,
                     pose,
+                    &AXIS_STARTS_M,
                     &params,
                     &mut points,
                     &mut normals,

@@ -108,6 +108,11 @@ pub struct EvalShapeArgs {
     /// Eq. 7's Λ on those coefficients [default: the fit's FREE_PRIOR_WEIGHT, 0.1].
     #[arg(long)]
     pub free_weight: Option<f32>,
+    /// The combined fit runs from the salient points' start moved this many millimetres along the body, each, and
+    /// keeps the fit with the lowest residual [default: the fit's AXIS_STARTS_M, -90,-60,-30,0,30,60,90]; 0 gives the
+    /// single start of the rounds before 2026-12-08 (docs/shape-eval.md, round 13).
+    #[arg(long, value_delimiter = ',', allow_hyphen_values = true)]
+    pub axis_starts_mm: Option<Vec<f32>>,
     /// Write the report here.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -174,6 +179,13 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         a.free_weight.is_none_or(|w| w.is_finite() && w >= 0.0),
         "--free-weight must be a finite number ≥ 0"
     );
+    anyhow::ensure!(
+        a.axis_starts_mm
+            .iter()
+            .flatten()
+            .all(|d| d.is_finite() && d.abs() <= 500.0),
+        "--axis-starts-mm must be finite offsets within ±500 mm"
+    );
     let cfg = EvalConfig {
         seed: a.seed,
         point_noise_m: a.point_noise_mm * 1e-3,
@@ -188,6 +200,10 @@ pub fn run_eval(a: &EvalShapeArgs) -> Result<()> {
         bed_weight: a.bed_weight,
         free_coeffs: a.free_coeffs.clone(),
         free_weight: a.free_weight.unwrap_or(supine_core::fit::FREE_PRIOR_WEIGHT),
+        axis_starts_m: match &a.axis_starts_mm {
+            Some(v) => v.iter().map(|d| d * 1e-3).collect(),
+            None => supine_core::fit::AXIS_STARTS_M.to_vec(),
+        },
     };
     let r = evaluate(&ds, &model, &bytes, &cfg)?;
     print_table(&r);

@@ -13,7 +13,9 @@ use nalgebra::{Point3, Vector3};
 use std::time::Instant;
 use supine_core::body_model::BodyModelView;
 use supine_core::depth::DepthFrame;
-use supine_core::fit::{BedContact, FitParams, fit_shape, fit_shape_on_bed, initial_pose};
+use supine_core::fit::{
+    BedContact, FitParams, fit_shape, fit_shape_along_axis, fit_shape_on_bed, initial_pose,
+};
 use supine_core::forest::infer::{InferConfig, Method, Workspace, estimate_above};
 use supine_core::forest::model::ForestView;
 use supine_core::icp::IcpParams;
@@ -247,6 +249,9 @@ pub struct EvalConfig {
     pub free_coeffs: Option<Vec<usize>>,
     /// Λ on those coefficients (`supine_core::fit::FREE_PRIOR_WEIGHT` by default).
     pub free_weight: f32,
+    /// Offsets along the body the combined fit starts from, metres (`supine_core::fit::AXIS_STARTS_M` by default;
+    /// `[0.0]`: the one start of the rounds before 2026-12-08).
+    pub axis_starts_m: Vec<f32>,
 }
 
 impl EvalConfig {
@@ -395,12 +400,13 @@ pub fn evaluate(
                 FitParams::combined_with(icp, cfg.free_coeffs.as_deref().unwrap_or(&torso), cfg.free_weight);
             cfg.tune(&mut p);
             let combined = initial_pose(&body, &est.shape, &pts, &up).ok().and_then(|pose0| {
-                fit_shape(
+                fit_shape_along_axis(
                     &body,
                     &frame,
                     &k,
                     &est.shape,
                     pose0,
+                    &cfg.axis_starts_m,
                     &p,
                     &mut subset,
                     &mut normals,

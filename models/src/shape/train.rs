@@ -492,6 +492,7 @@ mod tests {
             bed_weight: 1.0,
             free_coeffs: None,
             free_weight: supine_core::fit::FREE_PRIOR_WEIGHT,
+            axis_starts_m: supine_core::fit::AXIS_STARTS_M.to_vec(),
         };
         let r = evaluate(&ds, &model, &a.bytes, &ec).unwrap();
         for m in ["subspace", "fitting", "combined", "combined_bed"] {
