@@ -183,13 +183,14 @@ pub fn fit_shape_along_axis(
 ) -> Result<FitResult, FitError> {
     let (hip, sh) = hip_and_shoulder_centres(body, z0);
     let axis = camera_from_model.rotation * (sh - hip).try_normalize(1e-6).unwrap_or_else(Vector3::y);
-    let mut best: Option<FitResult> = None;
-    let mut last = None;
-    for &d in if offsets_m.is_empty() {
+    let offsets = if offsets_m.is_empty() {
         &[0.0][..]
     } else {
         offsets_m
-    } {
+    };
+    let mut best: Option<FitResult> = None;
+    let mut last = None;
+    for &d in offsets {
         let mut start = camera_from_model;
         start.translation.vector += axis * d;
         match fit_shape(body, frame, k, z0, start, params, points, normals) {
